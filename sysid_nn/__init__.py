@@ -1,0 +1,38 @@
+"""Identification of non-linear dynamic structures with recurrent neural networks.
+
+The toolbox implements the tapped-delay-line (TDL) and innovation state-space
+(ISSM) recurrent networks of Kirkegaard, Nielsen & Hansen (1995) as
+scikit-learn regressors, a Bouc-Wen hysteretic oscillator to generate data,
+and the residual tests used to validate the identified models.
+
+Public modules: :mod:`sysid_nn.excitation`, :mod:`sysid_nn.oscillator`,
+:mod:`sysid_nn.residuals`, :mod:`sysid_nn.metrics`, :mod:`sysid_nn.plotting`,
+:mod:`sysid_nn.study`.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__version__ = "0.1.0.dev0"
+
+# Names are resolved on first access so that ``import sysid_nn`` stays light
+# (no numba compilation, no matplotlib) until a class is actually used.
+_LAZY = {
+    "HystereticOscillator": "sysid_nn.oscillator",
+    "TDLRegressor": "sysid_nn._tdl",
+    "ISSMRegressor": "sysid_nn._issm",
+    "DivergenceWarning": "sysid_nn._base",
+}
+
+__all__ = ["DivergenceWarning", "HystereticOscillator", "ISSMRegressor", "TDLRegressor"]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'sysid_nn' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *__all__])

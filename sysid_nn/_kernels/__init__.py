@@ -1,0 +1,1 @@
+"""Compiled (numba) kernels: pure functions on float64 arrays and ints."""
