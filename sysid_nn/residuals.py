@@ -1,0 +1,1042 @@
+"""Correlation tests on the residuals of an identified model (paper 4.3).
+
+An adequate model leaves residuals ``e(t)`` (measured minus model output)
+that are white and independent of the input. This module provides
+
+* :func:`whiteness_test`: autocorrelation of ``e`` with its confidence band
+  and the chi-square (Box-Pierce) test, Ljung-Box alongside (fig. 4.3);
+* :func:`cross_correlation_test`: residual/input cross-correlation for
+  lags ``-M..M`` with the chi-square tests of Soderstrom & Stoica for
+  positive lags (unmodelled dynamics) and negative lags (feedback) (fig. 4.4);
+* :func:`nonlinear_correlation_tests`: the higher-order correlation tests of
+  Billings & Voon (1986) that also see unmodelled non-linear terms;
+* :func:`analyze_residuals`: all of them for a fitted estimator on data, per
+  sequence and pooled, with a summary table and a figure.
+
+Conventions
+-----------
+All correlations use the biased estimator (sums divided by ``N``, not by
+``N - |tau|``), each sequence centred on its own mean, and are normalised to
+correlation coefficients. A **list of sequences** is pooled without crossing
+sequence boundaries: lagged products ``sum_t a_j(t) b_j(t - tau)`` are summed
+inside every sequence ``j`` and then over sequences, and divided by the pooled
+sums of squares, so that ``N = sum_j N_j`` counts all samples. One sequence in
+a list gives exactly the single-sequence result.
+
+The cross-correlation lag convention is ``r_eu(tau) = corr(e(t), u(t - tau))``:
+a positive lag means the input leads the residual.
+
+Residuals containing NaN (a diverged free run) are rejected by the test
+functions with a ``ValueError``; :func:`analyze_residuals` reports such a
+sequence as ``"divergent"`` in its summary instead.
+
+References
+----------
+T. Soderstrom and P. Stoica, *System Identification*, Prentice Hall, 1989,
+section 11.4.
+S. A. Billings and W. S. F. Voon, "Correlation based model validity tests for
+non-linear models", *Int. J. Control* 44(1), 1986.
+S. A. Billings and Q. M. Zhu, "Nonlinear model validation using correlation
+tests", *Int. J. Control* 60(6), 1994.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+import scipy.linalg
+from scipy import stats
+from statsmodels.tsa.stattools import ccovf
+
+from sysid_nn.metrics import _as_sequence_list, _check_paired, _is_sequence_list
+
+__all__ = [
+    "CorrelationTest",
+    "CrossCorrelationResult",
+    "NonlinearTestResult",
+    "ResidualAnalysis",
+    "WhitenessResult",
+    "analyze_residuals",
+    "cross_correlation_test",
+    "nonlinear_correlation_tests",
+    "whiteness_test",
+]
+
+
+# ----------------------------------------------------------------------------
+# Validation
+# ----------------------------------------------------------------------------
+def _series_list(data: Any, name: str) -> list[np.ndarray]:
+    """One finite series per sequence (1-D, or 2-D with one column)."""
+    seqs, _ = _as_sequence_list(data, name, allow_nan=False)
+    if seqs[0].shape[1] != 1:
+        raise ValueError(
+            f"{name} must be one series, 1-D or with one column; got "
+            f"{seqs[0].shape[1]} columns. Test each column separately, e.g. "
+            f"{name}[:, 0], or use analyze_residuals for all outputs."
+        )
+    return [s[:, 0] for s in seqs]
+
+
+def _input_list(data: Any, residuals: list[np.ndarray]) -> list[np.ndarray]:
+    """Finite 2-D input sequences paired with the residual sequences."""
+    seqs, _ = _as_sequence_list(data, "inputs", allow_nan=False)
+    _check_paired([r[:, None] for r in residuals], seqs, "residuals", "inputs")
+    return seqs
+
+
+def _check_settings(max_lag: Any, alpha: Any, residuals: list[np.ndarray]) -> float:
+    """Validate ``max_lag`` and ``alpha``; return the band quantile z."""
+    n_min = min(r.size for r in residuals)
+    if (
+        isinstance(max_lag, bool)
+        or not isinstance(max_lag, (int, np.integer))
+        or not 1 <= max_lag < n_min
+    ):
+        raise ValueError(
+            f"max_lag must be an integer with 1 <= max_lag < n_samples = {n_min} "
+            f"(of the shortest sequence); got {max_lag!r}. Use a smaller max_lag "
+            "(about 25, well below n_samples) or longer records."
+        )
+    if not (isinstance(alpha, (float, int)) and 0 < alpha < 1):
+        raise ValueError(f"alpha must be a number in (0, 1), e.g. 0.05; got {alpha!r}.")
+    return float(stats.norm.ppf(1 - alpha / 2))
+
+
+# ----------------------------------------------------------------------------
+# Pooled correlations and the chi-square statistic
+# ----------------------------------------------------------------------------
+def _xcorr(
+    a: list[np.ndarray], b: list[np.ndarray], lags: np.ndarray, names: tuple[str, str]
+) -> np.ndarray:
+    """Pooled ``corr(a(t), b(t - lag))`` for every lag (any sign).
+
+    Lagged products are summed inside each sequence (statsmodels ``ccovf``,
+    biased, per-sequence mean removed) and then over sequences; lags longer
+    than a sequence contribute nothing from it.
+    """
+    num = np.zeros(lags.size)
+    ss_a = ss_b = 0.0
+    pos, neg = lags >= 0, lags < 0
+    for x, z in zip(a, b, strict=True):
+        n = x.size
+        ss_a += n * np.var(x)
+        ss_b += n * np.var(z)
+        # ccovf(x, z)[k] = 1/n sum_t x(t + k) z(t): lag +k; swapped: lag -k.
+        if pos.any():
+            fwd = n * ccovf(x, z, adjusted=False, demean=True, fft=True)
+            ok = pos & (lags < n)
+            num[ok] += fwd[lags[ok]]
+        if neg.any():
+            bwd = n * ccovf(z, x, adjusted=False, demean=True, fft=True)
+            ok = neg & (-lags < n)
+            num[ok] += bwd[-lags[ok]]
+    for ss, name in ((ss_a, names[0]), (ss_b, names[1])):
+        if ss <= 0:
+            raise ValueError(
+                f"{name} is constant, so its correlations are undefined; "
+                "pass a varying signal (or drop that column)."
+            )
+    return num / np.sqrt(ss_a * ss_b)
+
+
+def _chi2_statistic(
+    rho: np.ndarray, lags: np.ndarray, regressor: list[np.ndarray], n: int, name: str
+) -> float:
+    """``N rho^T R^{-1} rho`` for correlations of a white series with ``regressor``.
+
+    If ``w`` is white and independent of ``v``, ``sqrt(N) rho_wv(tau)`` over
+    the lag set is asymptotically normal with covariance ``R[i, j] =
+    rho_v(tau_i - tau_j)`` (the Toeplitz matrix of the regressor's
+    autocorrelations), so the statistic is chi-square with ``len(lags)`` dof
+    (Soderstrom & Stoica, sec. 11.4, with covariances divided by their
+    variances).
+    """
+    span = int(lags.max() - lags.min())
+    acf_v = _xcorr(regressor, regressor, np.arange(span + 1), (name, name))
+    toeplitz = acf_v[np.abs(lags[:, None] - lags[None, :])]
+    try:
+        solution = scipy.linalg.solve(toeplitz, rho, assume_a="pos")
+    except (np.linalg.LinAlgError, scipy.linalg.LinAlgError):
+        # A regressor with a line spectrum (e.g. a pure sine) has a singular
+        # Toeplitz matrix; the pseudo-inverse tests the identifiable part.
+        solution = np.linalg.pinv(toeplitz) @ rho
+    return float(n * rho @ solution)
+
+
+@dataclass(frozen=True)
+class CorrelationTest:
+    """One correlation function with its confidence band and chi-square test.
+
+    Attributes
+    ----------
+    name : str
+        Test name, e.g. ``"phi_u2e"``.
+    input : int or None
+        Input column the test involves (None for the residual alone).
+    lags : ndarray of int
+        Lags at which ``values`` is given; all of them enter the test.
+    values : ndarray
+        Normalised correlations at ``lags``.
+    band : float
+        Half-width ``z_{1-alpha/2} / sqrt(N)`` of the confidence band.
+    statistic : float
+        Chi-square statistic ``N rho^T R^{-1} rho``.
+    dof : int
+        Degrees of freedom, the number of lags.
+    p_value : float
+        Upper tail probability of the statistic.
+    alpha : float
+        Significance level.
+    n_samples : int
+        Number of samples ``N`` (pooled over sequences).
+    """
+
+    name: str
+    input: int | None
+    lags: np.ndarray
+    values: np.ndarray
+    band: float
+    statistic: float
+    dof: int
+    p_value: float
+    alpha: float
+    n_samples: int
+
+    @property
+    def passed(self) -> bool:
+        """True if the chi-square test does not reject (``p_value >= alpha``)."""
+        return bool(self.p_value >= self.alpha)
+
+    @property
+    def n_outside(self) -> int:
+        """Number of lags whose correlation lies outside the band."""
+        return int(np.sum(np.abs(self.values) > self.band))
+
+    def to_frame(self) -> pd.DataFrame:
+        """Tidy frame: test, input, lag, value, lower, upper, outside."""
+        return pd.DataFrame(
+            {
+                "test": self.name,
+                "input": self.input,
+                "lag": self.lags,
+                "value": self.values,
+                "lower": -self.band,
+                "upper": self.band,
+                "outside": np.abs(self.values) > self.band,
+            }
+        )
+
+
+def _correlation_test(
+    name: str,
+    white: list[np.ndarray],
+    regressor: list[np.ndarray],
+    lags: np.ndarray,
+    *,
+    z: float,
+    alpha: float,
+    input_index: int | None,
+    names: tuple[str, str],
+) -> CorrelationTest:
+    """Correlations of ``white(t)`` with ``regressor(t - lag)`` and their test."""
+    n = sum(w.size for w in white)
+    rho = _xcorr(white, regressor, lags, names)
+    stat = _chi2_statistic(rho, lags, regressor, n, names[1])
+    return CorrelationTest(
+        name=name,
+        input=input_index,
+        lags=lags,
+        values=rho,
+        band=z / np.sqrt(n),
+        statistic=stat,
+        dof=int(lags.size),
+        p_value=float(stats.chi2.sf(stat, lags.size)),
+        alpha=float(alpha),
+        n_samples=n,
+    )
+
+
+# ----------------------------------------------------------------------------
+# Whiteness
+# ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class WhitenessResult:
+    """Autocorrelation of the residuals and the chi-square whiteness test.
+
+    Attributes
+    ----------
+    lags : ndarray of int
+        ``0..max_lag``.
+    acf : ndarray
+        Residual autocorrelation ``r(tau) / r(0)`` at ``lags`` (``acf[0] = 1``).
+    band : float
+        Half-width ``z_{1-alpha/2} / sqrt(N)`` of the confidence band.
+    statistic : float
+        ``N sum_{tau=1..M} r(tau)^2 / r(0)^2`` (Box-Pierce), chi-square with
+        ``M`` dof when the residuals are white.
+    dof : int
+        ``M = max_lag``.
+    p_value : float
+        Upper tail probability of ``statistic``.
+    ljung_box : float
+        Ljung-Box statistic ``N (N + 2) sum_tau r(tau)^2 / (N - tau)``
+        (pooled: ``N - tau`` replaced by the number of lagged pairs).
+    ljung_box_p_value : float
+        Its p-value (chi-square, ``M`` dof).
+    alpha : float
+        Significance level.
+    n_samples : int
+        ``N`` (pooled over sequences).
+    """
+
+    lags: np.ndarray
+    acf: np.ndarray
+    band: float
+    statistic: float
+    dof: int
+    p_value: float
+    ljung_box: float
+    ljung_box_p_value: float
+    alpha: float
+    n_samples: int
+
+    @property
+    def passed(self) -> bool:
+        """True if whiteness is not rejected (``p_value >= alpha``)."""
+        return bool(self.p_value >= self.alpha)
+
+    @property
+    def summary(self) -> pd.Series:
+        """Statistic, dof, p-value, decision and Ljung-Box as a Series."""
+        return pd.Series(
+            {
+                "statistic": self.statistic,
+                "dof": self.dof,
+                "p_value": self.p_value,
+                "passed": self.passed,
+                "ljung_box": self.ljung_box,
+                "ljung_box_p_value": self.ljung_box_p_value,
+                "n_samples": self.n_samples,
+                "n_outside": int(np.sum(np.abs(self.acf[1:]) > self.band)),
+            }
+        )
+
+    def to_frame(self) -> pd.DataFrame:
+        """Autocorrelation by lag with the band (columns acf, lower, upper, outside)."""
+        outside = np.abs(self.acf) > self.band
+        outside[self.lags == 0] = False  # r(0) = 1 by definition, not a test lag
+        return pd.DataFrame(
+            {
+                "acf": self.acf,
+                "lower": -self.band,
+                "upper": self.band,
+                "outside": outside,
+            },
+            index=pd.Index(self.lags, name="lag"),
+        )
+
+
+def whiteness_test(
+    residuals: Any, max_lag: int = 25, alpha: float = 0.05
+) -> WhitenessResult:
+    """Chi-square test that the residuals are white (fig. 4.3).
+
+    The autocorrelation ``r(tau)/r(0)`` for ``tau = 0..M`` is the biased
+    estimator of statsmodels (``acf(..., adjusted=False)``). Under whiteness
+    each ``r(tau)/r(0)``, ``tau >= 1``, is about ``N(0, 1/N)``, which gives the
+    band ``+-z_{1-alpha/2}/sqrt(N)``, and ``x = N sum_{tau=1..M}
+    r(tau)^2/r(0)^2`` is chi-square with ``M`` degrees of freedom
+    (Soderstrom & Stoica, sec. 11.4; the Box-Pierce statistic of
+    statsmodels ``acorr_ljungbox(boxpierce=True)``).
+
+    Parameters
+    ----------
+    residuals : array-like of shape (n_samples,) or (n_samples, 1), or list
+        One residual series, or a list of series (several experiments) that
+        are pooled as described in the module notes. NaN is rejected.
+    max_lag : int, default=25
+        Largest lag ``M``, ``1 <= M < n_samples``.
+    alpha : float, default=0.05
+        Significance level of the band and the test.
+
+    Returns
+    -------
+    WhitenessResult
+        ``acf``, ``band``, ``statistic``, ``dof``, ``p_value``, ``passed``,
+        Ljung-Box alongside; ``to_frame()`` and ``summary``.
+
+    Raises
+    ------
+    ValueError
+        If ``residuals`` contain NaN or more than one column, or ``max_lag``
+        or ``alpha`` are out of range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> e = np.random.default_rng(0).standard_normal(1000)
+    >>> res = whiteness_test(e, max_lag=20)
+    >>> res.dof, res.passed
+    (20, True)
+    >>> res.to_frame().columns.tolist()
+    ['acf', 'lower', 'upper', 'outside']
+    """
+    e = _series_list(residuals, "residuals")
+    z = _check_settings(max_lag, alpha, e)
+    lags = np.arange(max_lag + 1)
+    acf = _xcorr(e, e, lags, ("residuals", "residuals"))
+    n = sum(x.size for x in e)
+    r2 = acf[1:] ** 2
+    box_pierce = float(n * r2.sum())
+    # Pairs at lag tau: N - tau for one sequence, summed over sequences.
+    pairs = np.array([sum(max(x.size - k, 0) for x in e) for k in lags[1:]])
+    ljung_box = float(n * (n + 2) * np.sum(r2 / pairs))
+    return WhitenessResult(
+        lags=lags,
+        acf=acf,
+        band=z / np.sqrt(n),
+        statistic=box_pierce,
+        dof=int(max_lag),
+        p_value=float(stats.chi2.sf(box_pierce, max_lag)),
+        ljung_box=ljung_box,
+        ljung_box_p_value=float(stats.chi2.sf(ljung_box, max_lag)),
+        alpha=float(alpha),
+        n_samples=n,
+    )
+
+
+# ----------------------------------------------------------------------------
+# Cross-correlation with the input
+# ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class CrossCorrelationResult:
+    """Residual/input cross-correlation and the two chi-square tests.
+
+    Attributes
+    ----------
+    lags : ndarray of int
+        ``-max_lag..max_lag``; ``ccf[k, i] = corr(e(t), u_i(t - lags[k]))``.
+    ccf : ndarray of shape (2 max_lag + 1, n_inputs)
+        Cross-correlation for every input column.
+    band : float
+        Half-width ``z_{1-alpha/2} / sqrt(N)`` of the confidence band.
+    positive : tuple of CorrelationTest
+        Test over the positive lags (input leads residual: unmodelled
+        dynamics), one per input column.
+    negative : tuple of CorrelationTest
+        Test over the negative lags ``-M..-1`` (residual leads input:
+        feedback), one per input column.
+    alpha : float
+        Significance level.
+    n_samples : int
+        ``N`` (pooled over sequences).
+    """
+
+    lags: np.ndarray
+    ccf: np.ndarray
+    band: float
+    positive: tuple[CorrelationTest, ...]
+    negative: tuple[CorrelationTest, ...]
+    alpha: float
+    n_samples: int
+
+    @property
+    def n_inputs(self) -> int:
+        """Number of input columns."""
+        return int(self.ccf.shape[1])
+
+    @property
+    def passed(self) -> bool:
+        """True if no test (either side, any input) rejects."""
+        return all(t.passed for t in (*self.positive, *self.negative))
+
+    @property
+    def summary(self) -> pd.DataFrame:
+        """One row per input and side: statistic, dof, p_value, passed, lags."""
+        rows = [
+            {
+                "input": t.input,
+                "side": side,
+                "statistic": t.statistic,
+                "dof": t.dof,
+                "p_value": t.p_value,
+                "passed": t.passed,
+                "lags": f"{t.lags.min()}..{t.lags.max()}",
+                "n_outside": t.n_outside,
+            }
+            for side, tests in (
+                ("positive", self.positive),
+                ("negative", self.negative),
+            )
+            for t in tests
+        ]
+        return pd.DataFrame(rows).sort_values(["input", "side"], ignore_index=True)
+
+    def to_frame(self) -> pd.DataFrame:
+        """Tidy frame: input, lag, ccf, lower, upper, outside."""
+        n_lags, n_inputs = self.ccf.shape
+        return pd.DataFrame(
+            {
+                "input": np.repeat(np.arange(n_inputs), n_lags),
+                "lag": np.tile(self.lags, n_inputs),
+                "ccf": self.ccf.T.ravel(),
+                "lower": -self.band,
+                "upper": self.band,
+                "outside": np.abs(self.ccf.T.ravel()) > self.band,
+            }
+        )
+
+
+def cross_correlation_test(
+    residuals: Any,
+    inputs: Any,
+    max_lag: int = 25,
+    alpha: float = 0.05,
+    *,
+    include_zero_lag: bool = True,
+) -> CrossCorrelationResult:
+    """Chi-square tests of residual/input cross-correlation (fig. 4.4).
+
+    With ``r_eu(tau) = corr(e(t), u(t - tau))`` (positive ``tau``: the input
+    leads the residual) the function returns ``r_eu`` for ``tau = -M..M``
+    with the band ``+-z_{1-alpha/2}/sqrt(N)`` and, per input column, two
+    tests (Soderstrom & Stoica, sec. 11.4): for a lag set ``T`` the statistic
+
+    ``x = N r^T (lambda R_u)^{-1} r``, ``r = [cov(e(t), u(t - tau))]_{tau in T}``,
+
+    with ``R_u[i, j] = cov(u(t - tau_i), u(t - tau_j))`` the Toeplitz matrix of
+    input autocovariances and ``lambda`` the residual variance, is
+    asymptotically chi-square with ``len(T)`` degrees of freedom when ``e`` is
+    white and independent of ``u``. It is computed in the equivalent
+    correlation form ``N rho^T P_u^{-1} rho``.
+
+    * positive lags ``T+ = 0..M`` (``1..M`` with ``include_zero_lag=False``):
+      rejection means input dynamics left in the residual (under-modelling);
+    * negative lags ``T- = -M..-1``: rejection means the input depends on
+      past residuals, i.e. feedback from output to input.
+
+    Parameters
+    ----------
+    residuals : array-like of shape (n_samples,) or (n_samples, 1), or list
+        One residual series or a list of series (pooled).
+    inputs : array-like of shape (n_samples,) or (n_samples, n_inputs), or list
+        The input (excitation) paired with ``residuals``.
+    max_lag : int, default=25
+        Largest lag ``M``, ``1 <= M < n_samples``.
+    alpha : float, default=0.05
+        Significance level.
+    include_zero_lag : bool, default=True
+        Whether lag 0 belongs to the positive-lag test. Set False for a model
+        with direct feed-through (``input_delay=0``), whose fit makes
+        ``r_eu(0)`` small by construction on training data.
+
+    Returns
+    -------
+    CrossCorrelationResult
+        ``lags``, ``ccf``, ``band``, ``positive`` and ``negative`` tests per
+        input, ``summary`` and ``to_frame()``.
+
+    Raises
+    ------
+    ValueError
+        If the series contain NaN, lengths differ, ``residuals`` has more than
+        one column, an input column is constant, or ``max_lag``/``alpha`` are
+        out of range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(1)
+    >>> u = rng.standard_normal((2000, 1))
+    >>> e = rng.standard_normal(2000) + 0.5 * np.roll(u[:, 0], 2)  # u leads e
+    >>> res = cross_correlation_test(e, u, max_lag=10)
+    >>> int(res.lags[np.argmax(res.ccf[:, 0])])
+    2
+    >>> res.summary[["side", "passed"]].values.tolist()
+    [['negative', True], ['positive', False]]
+    """
+    e = _series_list(residuals, "residuals")
+    u = _input_list(inputs, e)
+    z = _check_settings(max_lag, alpha, e)
+    lags = np.arange(-max_lag, max_lag + 1)
+    pos_lags = np.arange(0 if include_zero_lag else 1, max_lag + 1)
+    neg_lags = np.arange(-max_lag, 0)
+    ccf = np.empty((lags.size, u[0].shape[1]))
+    positive, negative = [], []
+    for i in range(u[0].shape[1]):
+        col = [x[:, i] for x in u]
+        names = ("residuals", f"inputs[:, {i}]")
+        ccf[:, i] = _xcorr(e, col, lags, names)
+        common = {"z": z, "alpha": alpha, "input_index": i, "names": names}
+        positive.append(_correlation_test("r_eu+", e, col, pos_lags, **common))
+        negative.append(_correlation_test("r_eu-", e, col, neg_lags, **common))
+    n = sum(x.size for x in e)
+    return CrossCorrelationResult(
+        lags=lags,
+        ccf=ccf,
+        band=z / np.sqrt(n),
+        positive=tuple(positive),
+        negative=tuple(negative),
+        alpha=float(alpha),
+        n_samples=n,
+    )
+
+
+# ----------------------------------------------------------------------------
+# Higher-order correlation tests for non-linear models
+# ----------------------------------------------------------------------------
+NONLINEAR_TESTS = ("phi_ee", "phi_ue", "phi_u2e", "phi_u2e2", "phi_eeu")
+
+
+@dataclass(frozen=True)
+class NonlinearTestResult:
+    """Billings-Voon higher-order correlation tests.
+
+    Attributes
+    ----------
+    tests : tuple of CorrelationTest
+        ``phi_ee`` once, then ``phi_ue``, ``phi_u2e``, ``phi_u2e2``,
+        ``phi_eeu`` for every input column.
+    alpha : float
+        Significance level.
+    n_samples : int
+        ``N`` (pooled over sequences).
+    """
+
+    tests: tuple[CorrelationTest, ...]
+    alpha: float
+    n_samples: int
+
+    @property
+    def passed(self) -> bool:
+        """True if no test rejects."""
+        return all(t.passed for t in self.tests)
+
+    def get(self, name: str, input: int | None = None) -> CorrelationTest:
+        """The test called ``name`` (for input column ``input``)."""
+        for t in self.tests:
+            if t.name == name and (name == "phi_ee" or t.input == (input or 0)):
+                return t
+        raise KeyError(
+            f"no test {name!r} for input {input!r}; names: {NONLINEAR_TESTS}"
+        )
+
+    @property
+    def summary(self) -> pd.DataFrame:
+        """One row per test and input: chi-square result and band counts."""
+        return pd.DataFrame(
+            [
+                {
+                    "test": t.name,
+                    "input": t.input,
+                    "statistic": t.statistic,
+                    "dof": t.dof,
+                    "p_value": t.p_value,
+                    "passed": t.passed,
+                    "n_outside": t.n_outside,
+                    "expected_outside": t.alpha * t.dof,
+                }
+                for t in self.tests
+            ]
+        )
+
+    def to_frame(self) -> pd.DataFrame:
+        """Tidy frame of all correlation functions: test, input, lag, value, band."""
+        return pd.concat([t.to_frame() for t in self.tests], ignore_index=True)
+
+
+def nonlinear_correlation_tests(
+    residuals: Any, inputs: Any, max_lag: int = 25, alpha: float = 0.05
+) -> NonlinearTestResult:
+    """Higher-order correlation tests for non-linear models (Billings & Voon).
+
+    A linear-in-correlation check misses non-linear terms left in the
+    residual (e.g. ``u(t-1)^2``, which is uncorrelated with ``u`` for a
+    symmetric input). For a valid model (Billings & Voon 1986) the
+    normalised correlations below vanish, with ``u2 = u^2 - mean(u^2)`` and
+    ``e2 = e^2 - mean(e^2)``:
+
+    ============  ==========================================  ============
+    test          correlation                                 lags
+    ============  ==========================================  ============
+    ``phi_ee``    ``corr(e(t), e(t - tau))``                  ``1..M``
+    ``phi_ue``    ``corr(e(t), u(t - tau))``                  ``-M..M``
+    ``phi_u2e``   ``corr(e(t), u2(t - tau))``                 ``-M..M``
+    ``phi_u2e2``  ``corr(e2(t), u2(t - tau))``                ``-M..M``
+    ``phi_eeu``   ``corr(e(t), e(t - tau) u(t - tau))``       ``1..M``
+    ============  ==========================================  ============
+
+    (``phi_eeu`` at lag ``k`` is Billings & Voon's ``phi_e(eu)(k - 1)``.)
+
+    **Decision rule.** Each test is the portmanteau chi-square test used for
+    the cross-correlation: ``N rho^T R_v^{-1} rho``, with ``R_v`` the Toeplitz
+    matrix of autocorrelations of the second factor ``v`` (``u``, ``u2``,
+    ``e u``; ``R = I`` for ``phi_ee``), is asymptotically chi-square with as
+    many dof as lags when the first factor is white and independent of the
+    past of ``v``; the test passes if ``p_value >= alpha``. This accounts
+    for correlated lags and is exact in level, unlike counting lags outside
+    the ``+-z/sqrt(N)`` band; that count (``n_outside``) is reported beside
+    the expected ``alpha * n_lags`` for the classic visual reading.
+
+    Parameters
+    ----------
+    residuals : array-like of shape (n_samples,) or (n_samples, 1), or list
+        One residual series or a list of series (pooled).
+    inputs : array-like of shape (n_samples,) or (n_samples, n_inputs), or list
+        The input paired with ``residuals``.
+    max_lag : int, default=25
+        Largest lag ``M``, ``1 <= M < n_samples``.
+    alpha : float, default=0.05
+        Significance level.
+
+    Returns
+    -------
+    NonlinearTestResult
+        ``tests``, ``passed``, ``summary`` and ``to_frame()``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(2)
+    >>> u = rng.standard_normal(3000)
+    >>> e = 0.1 * rng.standard_normal(3000) + 0.3 * np.roll(u, 1) ** 2
+    >>> res = nonlinear_correlation_tests(e, u, max_lag=10)
+    >>> res.get("phi_ue").passed, res.get("phi_u2e").passed
+    (True, False)
+    """
+    e = _series_list(residuals, "residuals")
+    u = _input_list(inputs, e)
+    z = _check_settings(max_lag, alpha, e)
+    both = np.arange(-max_lag, max_lag + 1)
+    past = np.arange(1, max_lag + 1)
+    e2 = [x**2 for x in e]
+    common = {"z": z, "alpha": alpha}
+    tests = [
+        _correlation_test(
+            "phi_ee", e, e, past, input_index=None, names=("residuals",) * 2, **common
+        )
+    ]
+    for i in range(u[0].shape[1]):
+        col = [x[:, i] for x in u]
+        name = f"inputs[:, {i}]"
+        sq = [x**2 for x in col]  # centred inside the correlation
+        eu = [a * b for a, b in zip(e, col, strict=True)]
+        for test, white, reg, lags, names in (
+            ("phi_ue", e, col, both, ("residuals", name)),
+            ("phi_u2e", e, sq, both, ("residuals", f"{name}**2")),
+            ("phi_u2e2", e2, sq, both, ("residuals**2", f"{name}**2")),
+            ("phi_eeu", e, eu, past, ("residuals", f"residuals*{name}")),
+        ):
+            tests.append(
+                _correlation_test(
+                    test, white, reg, lags, input_index=i, names=names, **common
+                )
+            )
+    return NonlinearTestResult(
+        tests=tuple(tests), alpha=float(alpha), n_samples=sum(x.size for x in e)
+    )
+
+
+# ----------------------------------------------------------------------------
+# Everything for a fitted estimator
+# ----------------------------------------------------------------------------
+Key = tuple[int | str, int]  # (sequence index or "pooled", output column)
+
+
+@dataclass(frozen=True)
+class ResidualAnalysis:
+    """All residual tests of a model on data; see :func:`analyze_residuals`.
+
+    Attributes
+    ----------
+    residuals : ndarray or list of ndarray
+        Measured minus model output, shaped like ``y`` (a list for a list).
+    whiteness : dict
+        ``{(sequence, output): WhitenessResult}``; ``sequence`` is the index
+        in the list (0 for an array) or ``"pooled"``.
+    cross_correlation : dict
+        ``{(sequence, output): CrossCorrelationResult}``.
+    nonlinear : dict
+        ``{(sequence, output): NonlinearTestResult}`` (empty if not run).
+    summary : pandas.DataFrame
+        One row per sequence (then ``"pooled"``) x output x input x test with
+        columns ``sequence, output, input, test, statistic, dof, p_value,
+        passed, n_samples, status``; ``status`` is ``"ok"`` or
+        ``"divergent"`` (NaN statistics, ``passed=False``).
+    divergent : tuple of int
+        Sequences whose residuals contain NaN (excluded from the pooled tests).
+    mode : str
+        ``"prediction"`` or ``"simulation"``.
+    horizon : int
+        Prediction horizon (prediction mode).
+    """
+
+    residuals: Any
+    whiteness: dict[Key, WhitenessResult]
+    cross_correlation: dict[Key, CrossCorrelationResult]
+    nonlinear: dict[Key, NonlinearTestResult]
+    summary: pd.DataFrame
+    divergent: tuple[int, ...]
+    mode: str
+    horizon: int
+    _default_sequence: int | str = field(default=0, repr=False)
+
+    @property
+    def passed(self) -> bool:
+        """True if every test on every sequence passed (divergence fails)."""
+        return bool(self.summary["passed"].all())
+
+    def to_frame(self) -> pd.DataFrame:
+        """Tidy frame of all correlation functions with their bands.
+
+        Columns ``sequence, output, test, input, lag, value, lower, upper,
+        outside``; ``test`` is ``"acf"``, ``"r_eu"`` or a non-linear test name.
+        """
+        frames = []
+        for (seq, out), w in self.whiteness.items():
+            f = w.to_frame().reset_index().rename(columns={"acf": "value"})
+            f.insert(0, "test", "acf")
+            f.insert(1, "input", None)
+            frames.append(f.assign(sequence=seq, output=out))
+        for (seq, out), c in self.cross_correlation.items():
+            f = c.to_frame().rename(columns={"ccf": "value"})
+            f.insert(0, "test", "r_eu")
+            frames.append(f.assign(sequence=seq, output=out))
+        for (seq, out), nl in self.nonlinear.items():
+            frames.append(nl.to_frame().assign(sequence=seq, output=out))
+        columns = ["sequence", "output", "test", "input", "lag", "value"]
+        columns += ["lower", "upper", "outside"]
+        if not frames:
+            return pd.DataFrame(columns=columns)
+        return pd.concat(frames, ignore_index=True)[columns]
+
+    def plot(self, sequence: int | str | None = None, output: int = 0) -> Any:
+        """Autocorrelation and cross-correlation panels (figs 4.3-4.4).
+
+        Parameters
+        ----------
+        sequence : int or "pooled", optional
+            Which result to draw; default ``"pooled"`` for a list, else 0.
+        output : int, default=0
+            Output column.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from sysid_nn.plotting import plot_residual_analysis
+
+        seq = self._default_sequence if sequence is None else sequence
+        return plot_residual_analysis(self, sequence=seq, output=output)
+
+
+_SUMMARY_COLUMNS = [
+    "sequence",
+    "output",
+    "input",
+    "test",
+    "statistic",
+    "dof",
+    "p_value",
+    "passed",
+    "n_samples",
+    "status",
+]
+
+
+def _summary_rows(
+    seq: int | str,
+    out: int,
+    results: tuple[Any, Any, Any],
+    dofs: dict[str, int],
+    n_inputs: int,
+    n_samples: int,
+) -> list[dict[str, Any]]:
+    """Summary rows of one (sequence, output); NaN statistics when divergent.
+
+    ``results`` is ``(whiteness, cross, nonlinear)``, all None for a divergent
+    sequence; ``dofs`` maps every test name in the summary to its dof.
+    """
+    w, c, nl = results
+    specs: list[tuple[int | None, str, Any]] = [(None, "whiteness", w)]
+    for i in range(n_inputs):
+        specs.append((i, "cross_positive", c and c.positive[i]))
+        specs.append((i, "cross_negative", c and c.negative[i]))
+        higher = [name for name in dofs if name.startswith("phi_")]
+        specs.extend((i, name, nl and nl.get(name, i)) for name in higher)
+    return [
+        {
+            "sequence": seq,
+            "output": out,
+            "input": inp,
+            "test": test,
+            "statistic": np.nan if res is None else res.statistic,
+            "dof": dofs[test],
+            "p_value": np.nan if res is None else res.p_value,
+            "passed": False if res is None else res.passed,
+            "n_samples": n_samples,
+            "status": "ok" if w is not None else "divergent",
+        }
+        for inp, test, res in specs
+    ]
+
+
+def analyze_residuals(
+    estimator: Any,
+    X: Any,
+    y: Any,
+    *,
+    mode: Literal["prediction", "simulation"] = "prediction",
+    horizon: int = 1,
+    max_lag: int = 25,
+    alpha: float = 0.05,
+    skip: int = 0,
+    include_zero_lag: bool = True,
+    nonlinear: bool = True,
+) -> ResidualAnalysis:
+    """Run a fitted model on data and test its residuals (figs 4.3-4.4).
+
+    The model output is ``estimator.predict(X, y, horizon=horizon)``
+    (``mode="prediction"``: the ``horizon``-step-ahead prediction from
+    measured outputs, paper 4.3) or ``estimator.simulate(X)``
+    (``mode="simulation"``: the free run, paper 4.4); the residuals are
+    ``y`` minus that output. For every sequence, output column and input
+    column the whiteness, cross-correlation and (optionally) the higher-order
+    tests are run; for a list of sequences also on the pooled sequences (see
+    the module notes: lagged sums per sequence, never across boundaries).
+
+    Notes: k-step-ahead residuals (``horizon > 1``) are a moving average of
+    order ``horizon - 1`` even for a perfect model, so whiteness is expected
+    to fail there; free-run residuals are usually coloured too. The
+    whiteness/feedback tests are designed for one-step prediction.
+
+    Parameters
+    ----------
+    estimator : object
+        Fitted model with ``predict(X, y=None, *, horizon=1)`` and
+        ``simulate(X)``.
+    X : array-like of shape (n_samples, n_inputs) or list of such
+        Excitation, passed to the estimator unchanged.
+    y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list
+        Measured outputs.
+    mode : {"prediction", "simulation"}, default="prediction"
+        Which model output the residuals are taken from.
+    horizon : int, default=1
+        Prediction horizon (prediction mode only).
+    max_lag : int, default=25
+        Largest lag ``M`` of all tests.
+    alpha : float, default=0.05
+        Significance level.
+    skip : int, default=0
+        Samples dropped from the start of every sequence before testing
+        (start-up transient of zero initial conditions).
+    include_zero_lag : bool, default=True
+        Passed to :func:`cross_correlation_test`.
+    nonlinear : bool, default=True
+        Also run :func:`nonlinear_correlation_tests`. Its ``phi_ee`` and
+        ``phi_ue`` duplicate the whiteness and cross-correlation tests, so
+        only ``phi_u2e``, ``phi_u2e2`` and ``phi_eeu`` enter the summary.
+
+    Returns
+    -------
+    ResidualAnalysis
+        ``residuals``, ``whiteness``, ``cross_correlation``, ``nonlinear``,
+        ``summary``, ``to_frame()`` and ``plot()``. A sequence whose residuals
+        contain NaN (a diverged simulation) appears as ``"divergent"`` in the
+        summary and is left out of the pooled tests.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> class Gain:  # y(t) = 2 u(t - 1), known exactly
+    ...     def simulate(self, X):
+    ...         return 2.0 * np.concatenate([[0.0], X[:-1, 0]])
+    ...     def predict(self, X, y=None, *, horizon=1):
+    ...         return self.simulate(X)
+    >>> rng = np.random.default_rng(0)
+    >>> X = rng.standard_normal((500, 1))
+    >>> y = Gain().simulate(X) + 0.1 * rng.standard_normal(500)
+    >>> report = analyze_residuals(Gain(), X, y, max_lag=10)
+    >>> report.summary["test"].tolist()
+    ['whiteness', 'cross_positive', 'cross_negative', 'phi_u2e', 'phi_u2e2', 'phi_eeu']
+    """
+    if mode not in ("prediction", "simulation"):
+        raise ValueError(f"mode must be 'prediction' or 'simulation'; got {mode!r}.")
+    if isinstance(skip, bool) or not isinstance(skip, (int, np.integer)) or skip < 0:
+        raise ValueError(f"skip must be an integer >= 0; got {skip!r}.")
+    X_seqs, is_list = _as_sequence_list(X, "X")
+    y_seqs, y_is_list = _as_sequence_list(y, "y")
+    if is_list != y_is_list:
+        raise ValueError(
+            "X and y must both be arrays or both be lists of sequences; got "
+            f"{type(X).__name__} and {type(y).__name__}."
+        )
+    _check_paired(X_seqs, y_seqs, "X", "y")
+    if mode == "prediction":
+        model = estimator.predict(X, y, horizon=horizon)
+    else:
+        model = estimator.simulate(X)
+    if _is_sequence_list(model) != is_list:
+        raise ValueError(
+            f"The estimator's {mode} output is not shaped like y (array vs list)."
+        )
+    m_seqs, _ = _as_sequence_list(model, f"{mode} output")
+    _check_paired(y_seqs, m_seqs, "y", f"{mode} output")
+    res_seqs = [a - b for a, b in zip(y_seqs, m_seqs, strict=True)]
+
+    # Mirror y: 1-D in, 1-D out.
+    y_items = list(y) if is_list else [y]
+    mirrored = [
+        r[:, 0] if np.ndim(item) == 1 else r
+        for r, item in zip(res_seqs, y_items, strict=True)
+    ]
+    residuals = mirrored if is_list else mirrored[0]
+
+    n_out, n_in = res_seqs[0].shape[1], X_seqs[0].shape[1]
+    tested = [(r[skip:], x[skip:]) for r, x in zip(res_seqs, X_seqs, strict=True)]
+    divergent = tuple(j for j, (r, _) in enumerate(tested) if np.isnan(r).any())
+    finite = [j for j in range(len(tested)) if j not in divergent]
+    groups: list[tuple[int | str, list[int]]] = [(j, [j]) for j in range(len(tested))]
+    if is_list:
+        groups.append(("pooled", finite))
+
+    m = int(max_lag)
+    dofs = {"whiteness": m, "cross_positive": m + int(include_zero_lag)}
+    dofs["cross_negative"] = m
+    if nonlinear:
+        dofs.update(phi_u2e=2 * m + 1, phi_u2e2=2 * m + 1, phi_eeu=m)
+    whiteness, cross, nonlin = {}, {}, {}
+    rows: list[dict[str, Any]] = []
+    for seq, members in groups:
+        ok = bool(members) and all(j in finite for j in members)
+        n_samples = sum(tested[j][0].shape[0] for j in members)
+        for out in range(n_out):
+            w = c = nl = None
+            if ok:
+                e = [tested[j][0][:, out] for j in members]
+                u = [tested[j][1] for j in members]
+                w = whiteness_test(e, max_lag, alpha)
+                c = cross_correlation_test(
+                    e, u, max_lag, alpha, include_zero_lag=include_zero_lag
+                )
+                whiteness[seq, out], cross[seq, out] = w, c
+                if nonlinear:
+                    nl = nonlinear_correlation_tests(e, u, max_lag, alpha)
+                    nonlin[seq, out] = nl
+            rows.extend(_summary_rows(seq, out, (w, c, nl), dofs, n_in, n_samples))
+    summary = pd.DataFrame(rows, columns=_SUMMARY_COLUMNS)
+    return ResidualAnalysis(
+        residuals=residuals,
+        whiteness=whiteness,
+        cross_correlation=cross,
+        nonlinear=nonlin,
+        summary=summary,
+        divergent=divergent,
+        mode=mode,
+        horizon=int(horizon),
+        _default_sequence="pooled" if is_list else 0,
+    )
