@@ -1,0 +1,215 @@
+"""Small input-checking helpers shared by the public modules.
+
+Every helper raises :class:`ValueError` (or :class:`TypeError` for a wrong
+type) with a message that names the argument, says what was wrong and how to
+fix it. Random states are converted with
+:func:`sklearn.utils.check_random_state`; nothing here duplicates it.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Sequence
+
+import numpy as np
+
+__all__ = [
+    "check_finite_array",
+    "check_in_range",
+    "check_positive",
+    "check_positive_int",
+    "check_real",
+]
+
+
+def check_real(x: object, name: str) -> float:
+    """Return ``x`` as a finite Python float, or raise naming ``name``.
+
+    Parameters
+    ----------
+    x : object
+        The value to check (a real number, not a bool).
+    name : str
+        The argument name used in the error message.
+
+    Returns
+    -------
+    float
+        ``float(x)``.
+
+    Examples
+    --------
+    >>> check_real(2, "dt")
+    2.0
+    """
+    if isinstance(x, bool) or not isinstance(x, numbers.Real):
+        raise TypeError(
+            f"{name} must be a real number, got {x!r} of type {type(x).__name__}."
+        )
+    value = float(x)
+    if not np.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}; pass a finite number.")
+    return value
+
+
+def check_positive(x: object, name: str, *, allow_zero: bool = False) -> float:
+    """Return ``x`` as a float after checking that it is positive.
+
+    Parameters
+    ----------
+    x : object
+        The value to check.
+    name : str
+        The argument name used in the error message.
+    allow_zero : bool, default=False
+        Accept ``0`` as well (non-negative check).
+
+    Returns
+    -------
+    float
+        ``float(x)``.
+
+    Examples
+    --------
+    >>> check_positive(0.01, "dt")
+    0.01
+    >>> check_positive(0.0, "zeta", allow_zero=True)
+    0.0
+    """
+    value = check_real(x, name)
+    if value < 0 or (value == 0 and not allow_zero):
+        need = "non-negative (>= 0)" if allow_zero else "positive (> 0)"
+        raise ValueError(
+            f"{name} must be {need}, got {value!r}; pass a {need.split()[0]} value."
+        )
+    return value
+
+
+def check_in_range(
+    x: object,
+    name: str,
+    low: float,
+    high: float,
+    *,
+    closed: tuple[bool, bool] = (True, True),
+) -> float:
+    """Return ``x`` as a float after checking ``low <= x <= high``.
+
+    Parameters
+    ----------
+    x : object
+        The value to check.
+    name : str
+        The argument name used in the error message.
+    low, high : float
+        The bounds of the admissible interval.
+    closed : tuple of bool, default=(True, True)
+        Whether the lower and upper bound belong to the interval.
+
+    Returns
+    -------
+    float
+        ``float(x)``.
+
+    Examples
+    --------
+    >>> check_in_range(0.05, "alpha", 0.0, 1.0)
+    0.05
+    """
+    value = check_real(x, name)
+    ok_low = value >= low if closed[0] else value > low
+    ok_high = value <= high if closed[1] else value < high
+    if not (ok_low and ok_high):
+        interval = (
+            f"{'[' if closed[0] else '('}{low}, {high}{']' if closed[1] else ')'}"
+        )
+        raise ValueError(
+            f"{name} must lie in {interval}, got {value!r}; pass a value in {interval}."
+        )
+    return value
+
+
+def check_positive_int(x: object, name: str) -> int:
+    """Return ``x`` as an int after checking it is an integer >= 1.
+
+    Parameters
+    ----------
+    x : object
+        The value to check (an integral number, not a bool).
+    name : str
+        The argument name used in the error message.
+
+    Returns
+    -------
+    int
+        ``int(x)``.
+
+    Examples
+    --------
+    >>> check_positive_int(25, "n_realizations")
+    25
+    """
+    if isinstance(x, bool) or not isinstance(x, numbers.Integral):
+        raise TypeError(
+            f"{name} must be an integer >= 1, got {x!r} of type {type(x).__name__}."
+        )
+    if x < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {x!r}; pass at least 1.")
+    return int(x)
+
+
+def check_finite_array(
+    a: object,
+    name: str,
+    *,
+    ndim: int | Sequence[int] = (1, 2),
+    min_samples: int = 1,
+) -> np.ndarray:
+    """Return ``a`` as a float64 array after checking its dimensions and values.
+
+    Parameters
+    ----------
+    a : array-like
+        The values to check (lists, NumPy arrays, pandas objects).
+    name : str
+        The argument name used in the error message.
+    ndim : int or sequence of int, default=(1, 2)
+        Admissible numbers of dimensions.
+    min_samples : int, default=1
+        Minimum length of the last axis (the time axis).
+
+    Returns
+    -------
+    ndarray of float64
+        A C-contiguous copy or view of ``a``.
+
+    Examples
+    --------
+    >>> check_finite_array([0.0, 1.0, 2.0], "F")
+    array([0., 1., 2.])
+    """
+    allowed = (ndim,) if isinstance(ndim, numbers.Integral) else tuple(ndim)
+    try:
+        arr = np.asarray(a, dtype=np.float64, order="C")
+    except (TypeError, ValueError) as exc:
+        raise ValueError(
+            f"{name} must be a numeric array; could not convert it ({exc})."
+        ) from exc
+    if arr.ndim not in allowed:
+        dims = " or ".join(f"{d}-D" for d in allowed)
+        raise ValueError(
+            f"{name} must be {dims}, got a {arr.ndim}-D array of shape {arr.shape}; "
+            f"reshape it (one row per realisation, time along the last axis)."
+        )
+    if arr.ndim > 0 and arr.shape[-1] < min_samples:
+        raise ValueError(
+            f"{name} must have at least {min_samples} sample(s) along its last axis, "
+            f"got shape {arr.shape}."
+        )
+    if not np.all(np.isfinite(arr)):
+        bad = int(np.size(arr) - np.count_nonzero(np.isfinite(arr)))
+        raise ValueError(
+            f"{name} contains {bad} NaN or infinite value(s); remove or "
+            f"interpolate them before passing {name}."
+        )
+    return arr
