@@ -1,0 +1,758 @@
+"""Shared machinery of the recurrent-network estimators.
+
+:class:`_RecurrentRegressorBase` holds everything the TDL and ISSM networks
+have in common: input validation for one sequence or a list of sequences,
+internal standardisation, the staged training loop (one-step fit, multiple
+shooting, free run), the three solvers, random restarts, validation
+selection, divergence handling and the ``predict``/``simulate``/``score``
+methods. A subclass supplies the structure: how a sequence is laid out for
+its kernels, the initial parameters, and the kernels themselves.
+"""
+
+from __future__ import annotations
+
+import numbers
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+from joblib import Parallel, delayed
+from scipy.optimize import minimize
+from sklearn.base import BaseEstimator
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.utils import check_array, check_random_state
+from sklearn.utils._param_validation import Interval, StrOptions
+from sklearn.utils.validation import check_is_fitted
+
+__all__ = ["DivergenceWarning"]
+
+#: A free run whose standardised output exceeds this multiple of the largest
+#: standardised training output is declared divergent.
+_DIVERGENCE_FACTOR = 100.0
+#: Share of ``max_iter`` spent on the one-step stage and on each multiple-
+#: shooting stage of the simulation schedule (100 and 40 of 150).
+_ONE_STEP_SHARE = 2.0 / 3.0
+_SHOOTING_SHARE = 4.0 / 15.0
+_FREE_RUN = np.iinfo(np.int64).max // 4
+
+
+class DivergenceWarning(UserWarning):
+    """A free-run simulation left the range of the training data.
+
+    The simulation is stopped at the first sample whose output is not finite
+    or exceeds a large multiple of the training output range; that sample and
+    all later ones of the sequence are returned as NaN.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> from sysid_nn import DivergenceWarning
+    >>> issubclass(DivergenceWarning, UserWarning)
+    True
+    """
+
+
+class _EarlyStop(Exception):
+    """Raised inside a solver callback to end a stage early."""
+
+
+@dataclass
+class _Data:
+    """Standardised sequences stacked for the kernels.
+
+    Sequence ``s`` occupies rows ``starts[s]:starts[s + 1]`` of ``Y`` and
+    ``U``; its first ``h`` rows are history (initial conditions).
+    """
+
+    Y: np.ndarray
+    U: np.ndarray
+    starts: np.ndarray
+    h: int
+
+    @property
+    def modelled(self) -> np.ndarray:
+        """Row indices of the modelled (non-history) rows."""
+        return np.concatenate(
+            [np.arange(a + self.h, b) for a, b in zip(self.starts[:-1], self.starts[1:])]
+        )
+
+    @property
+    def lengths(self) -> np.ndarray:
+        return np.diff(self.starts) - self.h
+
+
+# --------------------------------------------------------------------------
+# input handling
+# --------------------------------------------------------------------------
+def _as_sequence_list(X, name: str):
+    """Return ``(list_of_arrays, given_as_list)``; reject mixtures."""
+    if isinstance(X, (list, tuple)):
+        if len(X) == 0:
+            raise ValueError(
+                f"{name} is an empty list; pass at least one sequence "
+                "(a 2-D array of shape (n_samples, n_features))."
+            )
+        first = X[0]
+        if np.isscalar(first) or (isinstance(first, (list, tuple)) and np.isscalar(first[0])):
+            # A plain nested list is one array, as in scikit-learn.
+            return [X], False
+        return list(X), True
+    return [X], False
+
+
+def _check_finite(a: np.ndarray, name: str, index: int | None, as_list: bool) -> None:
+    bad = ~np.isfinite(a)
+    if bad.any():
+        sample = int(np.argwhere(bad)[0][0])
+        kind = "NaN" if np.isnan(a[bad]).any() else "inf"
+        where = f"{name}[{index}]" if as_list else name
+        raise ValueError(
+            f"Input {where} contains {kind} (first at sample {sample}); "
+            "remove or interpolate non-finite values before fitting or predicting."
+        )
+
+
+class _RecurrentRegressorBase(BaseEstimator):
+    """Base class of the recurrent-network regressors (not public)."""
+
+    _parameter_constraints: dict = {
+        "hidden_layer_sizes": ["array-like"],
+        "activation": [StrOptions({"logistic", "tanh"})],
+        "input_delay": [Interval(numbers.Integral, 0, None, closed="left")],
+        "focus": [StrOptions({"prediction", "simulation"})],
+        "shooting_segments": ["array-like"],
+        "solver": [StrOptions({"lm", "lbfgs", "slsqp"})],
+        "alpha": [Interval(numbers.Real, 0, None, closed="left")],
+        "max_iter": [Interval(numbers.Integral, 1, None, closed="left")],
+        "tol": [Interval(numbers.Real, 0, None, closed="left")],
+        "n_init": [Interval(numbers.Integral, 1, None, closed="left")],
+        "early_stopping": ["boolean"],
+        "validation_fraction": [Interval(numbers.Real, 0, 1, closed="neither")],
+        "n_iter_no_change": [Interval(numbers.Integral, 1, None, closed="left")],
+        "random_state": ["random_state"],
+        "verbose": ["verbose"],
+        "n_jobs": [None, numbers.Integral],
+    }
+
+    # ------------------------------------------------------------------ tags
+    @staticmethod
+    def _recurrent_tags(tags):
+        """Tags shared by the recurrent regressors.
+
+        Called by each estimator's ``__sklearn_tags__`` after
+        :class:`~sklearn.base.RegressorMixin` has set the regressor tags.
+        """
+        tags.target_tags.required = True
+        tags.target_tags.multi_output = True
+        # Rows are time steps of one experiment, not independent samples: a
+        # free-run score on shuffled tabular data means nothing.
+        tags.regressor_tags.poor_score = True
+        return tags
+
+    # ------------------------------------------------------- structure hooks
+    def _history_length(self) -> int:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _prepare_structure(self, data: _Data) -> None:  # pragma: no cover
+        """Fix data-dependent structure and the linear starting point."""
+        raise NotImplementedError
+
+    def _initial_params(self, rng: np.random.RandomState) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def _run(self, w, data: _Data, seg_len: int, want_jac: bool):  # pragma: no cover
+        """Return ``(Yhat, J or None, diverged, state_for_gradient)``."""
+        raise NotImplementedError
+
+    def _gradient(self, w, data: _Data, seg_len: int, state) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def _run_horizon(self, w, data: _Data, horizon: int) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def _history(self, n_seq: int, initial) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+        """Standardised history rows ``(Y_hist, U_hist)`` for every sequence."""
+        raise NotImplementedError
+
+    def _penalty_mask(self) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    # --------------------------------------------------------- validation
+    def _validate_Xy(self, X, y=None, *, reset: bool, y_required: bool):
+        """Validate one sequence or a list of them.
+
+        Returns ``(X_list, y_list or None, given_as_list, y_was_1d)``.
+        """
+        name = type(self).__name__
+        if y_required and y is None:
+            raise ValueError(
+                f"{name} requires y to be passed, but the target y is None."
+            )
+        X_list, as_list = _as_sequence_list(X, "X")
+        if y is not None:
+            y_list, y_as_list = _as_sequence_list(y, "y")
+            if y_as_list != as_list:
+                raise ValueError(
+                    "X and y must both be arrays (one sequence) or both be lists "
+                    f"of arrays (several sequences); got X as a "
+                    f"{'list' if as_list else 'array'} and y as a "
+                    f"{'list' if y_as_list else 'array'}."
+                )
+            if len(y_list) != len(X_list):
+                raise ValueError(
+                    f"X and y must hold the same number of sequences; got "
+                    f"{len(X_list)} and {len(y_list)}."
+                )
+        Xs, ys, y_1d = [], [], None
+        for i, Xi in enumerate(X_list):
+            if hasattr(Xi, "columns") and reset and i == 0:
+                self.feature_names_in_ = np.asarray(Xi.columns, dtype=object)
+            try:
+                Xi = check_array(
+                    Xi, dtype=np.float64, ensure_all_finite=False, input_name="X"
+                )
+            except ValueError as exc:
+                if as_list:
+                    raise ValueError(f"X[{i}]: {exc}") from exc
+                raise
+            _check_finite(Xi, "X", i, as_list)
+            Xs.append(Xi)
+            if y is not None:
+                yi = y_list[i]
+                yi = check_array(
+                    yi, dtype=np.float64, ensure_2d=False, ensure_all_finite=False,
+                    input_name="y",
+                )  # fmt: skip
+                if yi.ndim not in (1, 2):
+                    raise ValueError(
+                        f"y must be 1-D (n_samples,) or 2-D (n_samples, n_outputs); "
+                        f"got {yi.ndim} dimensions."
+                    )
+                this_1d = yi.ndim == 1
+                if y_1d is None:
+                    y_1d = this_1d
+                yi = yi.reshape(len(yi), -1)
+                _check_finite(yi, "y", i, as_list)
+                if len(yi) != len(Xi):
+                    where = f" in sequence {i}" if as_list else ""
+                    raise ValueError(
+                        f"X and y must have the same number of samples{where}; got "
+                        f"{len(Xi)} and {len(yi)}."
+                    )
+                ys.append(yi)
+        n_features = {Xi.shape[1] for Xi in Xs}
+        if len(n_features) > 1:
+            raise ValueError(
+                f"All sequences of X must have the same number of features; got "
+                f"{sorted(n_features)}."
+            )
+        n_features = n_features.pop()
+        if reset:
+            self.n_features_in_ = n_features
+            if not hasattr(X_list[0], "columns") and hasattr(self, "feature_names_in_"):
+                del self.feature_names_in_
+        elif n_features != self.n_features_in_:
+            raise ValueError(
+                f"X has {n_features} features, but {name} is expecting "
+                f"{self.n_features_in_} features as input."
+            )
+        if ys:
+            n_outputs = {yi.shape[1] for yi in ys}
+            if len(n_outputs) > 1:
+                raise ValueError(
+                    f"All sequences of y must have the same number of outputs; got "
+                    f"{sorted(n_outputs)}."
+                )
+            if not reset and ys[0].shape[1] != self.n_outputs_:
+                raise ValueError(
+                    f"y has {ys[0].shape[1]} outputs, but {name} was fitted with "
+                    f"{self.n_outputs_}."
+                )
+        return Xs, (ys if y is not None else None), as_list, bool(y_1d)
+
+    def _check_lengths(self, Xs, min_length: int, what: str = "X") -> None:
+        for i, Xi in enumerate(Xs):
+            if len(Xi) < min_length:
+                seq = f"sequence {i} of {what}" if len(Xs) > 1 else what
+                raise ValueError(
+                    f"{seq} has {len(Xi)} sample{'s' if len(Xi) != 1 else ''}; "
+                    f"{type(self).__name__} needs at least {min_length} samples "
+                    "per sequence with these lags. Use longer records or fewer lags."
+                )
+
+    # ------------------------------------------------------------ scaling
+    def _stack(self, Xs, ys, initial=None) -> _Data:
+        """Standardise and stack sequences, with their history rows."""
+        h = self._history_length()
+        Yh, Uh = self._history(len(Xs), initial)
+        n_out = self.n_outputs_
+        rows = [h + len(Xi) for Xi in Xs]
+        starts = np.concatenate([[0], np.cumsum(rows)]).astype(np.int64)
+        Y = np.zeros((starts[-1], n_out))
+        U = np.empty((starts[-1], self.n_features_in_))
+        for s, Xi in enumerate(Xs):
+            a = starts[s]
+            Y[a : a + h] = Yh[s]
+            U[a : a + h] = Uh[s]
+            U[a + h : starts[s + 1]] = (Xi - self._x_mean) / self._x_scale
+            if ys is not None:
+                Y[a + h : starts[s + 1]] = (ys[s] - self._y_mean) / self._y_scale
+        return _Data(Y=Y, U=U, starts=starts, h=h)
+
+    def _unstack(self, Yhat: np.ndarray, data: _Data, as_list: bool, y_1d: bool):
+        out = []
+        for a, b in zip(data.starts[:-1], data.starts[1:]):
+            yi = Yhat[a + data.h : b] * self._y_scale + self._y_mean
+            out.append(yi[:, 0] if y_1d else yi)
+        return out if as_list else out[0]
+
+    # ------------------------------------------------------------ fitting
+    def fit(self, X, y, *, X_val=None, y_val=None):
+        """Fit the network to one or several measured sequences.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs) or list of such
+            Excitation. A list holds one array per experiment; recurrences
+            restart at the start of each.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list
+            Measured response, one array per experiment.
+        X_val, y_val : array-like or list, default=None
+            Validation sequences for selecting the weights (early stopping).
+            Without them and with ``early_stopping=True``, whole sequences
+            (or the tail of a single sequence) are held out.
+
+        Returns
+        -------
+        self : object
+            The fitted estimator.
+        """
+        self._validate_params()
+        self._validate_structure_params()
+        Xs, ys, _, y_1d = self._validate_Xy(X, y, reset=True, y_required=True)
+        self.n_outputs_ = ys[0].shape[1]
+        self._y_1d = y_1d
+        self._validate_outputs()
+        if (X_val is None) != (y_val is None):
+            raise ValueError(
+                "X_val and y_val must be given together; got only "
+                f"{'X_val' if X_val is not None else 'y_val'}."
+            )
+        min_len = self._history_length() + 1
+        if X_val is not None:
+            Xv, yv, _, _ = self._validate_Xy(X_val, y_val, reset=False, y_required=True)
+        elif self.early_stopping:
+            Xs, ys, Xv, yv = self._split_validation(Xs, ys, min_len)
+        else:
+            Xv = yv = None
+        self._check_lengths(Xs, min_len)
+        if Xv is not None:
+            self._check_lengths(Xv, min_len, "X_val")
+
+        Xc, yc = np.concatenate(Xs), np.concatenate(ys)
+        self._x_mean, self._x_scale = _mean_scale(Xc)
+        self._y_mean, self._y_scale = _mean_scale(yc)
+        train = self._stack(Xs, ys)
+        val = self._stack(Xv, yv) if Xv is not None else None
+        self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train.Y).max())
+        self._prepare_structure(train)
+
+        rng = check_random_state(self.random_state)
+        seeds = rng.randint(np.iinfo(np.int32).max, size=self.n_init)
+        start = time.perf_counter()
+        runs = Parallel(n_jobs=self.n_jobs if self.n_init > 1 else None)(
+            delayed(self._fit_one)(train, val, seed, k) for k, seed in enumerate(seeds)
+        )
+        best = min(range(len(runs)), key=lambda k: runs[k].score)
+        chosen = runs[best]
+        if not np.all(np.isfinite(chosen.w)):
+            raise ValueError(
+                "The solver produced non-finite weights. Check the data for "
+                "extreme values or reduce the learning problem (fewer lags)."
+            )
+        self.coefs_ = chosen.w
+        self.n_iter_ = chosen.n_iter
+        self.loss_ = chosen.loss
+        self.best_validation_score_ = -chosen.val_loss if val is not None else None
+        self.restart_scores_ = np.array([-r.score for r in runs])
+        self.fit_time_ = time.perf_counter() - start
+        self._after_fit(train)
+        if not chosen.converged:
+            warnings.warn(
+                f"{type(self).__name__} stopped after max_iter={self.max_iter} "
+                "iterations of its last training stage before reaching tol="
+                f"{self.tol}. Increase max_iter or loosen tol.",
+                ConvergenceWarning,
+                stacklevel=2,
+            )
+        return self
+
+    def _validate_structure_params(self) -> None:
+        sizes = tuple(self.hidden_layer_sizes)
+        if not all(isinstance(n, numbers.Integral) and n > 0 for n in sizes):
+            raise ValueError(
+                "hidden_layer_sizes must be a tuple of positive integers (or () for "
+                f"the linear model); got {self.hidden_layer_sizes!r}."
+            )
+        segs = tuple(self.shooting_segments)
+        if not all(isinstance(n, numbers.Integral) and n > 1 for n in segs):
+            raise ValueError(
+                "shooting_segments must be a tuple of integers > 1 (segment "
+                f"lengths in samples, or () for none); got {self.shooting_segments!r}."
+            )
+
+    def _validate_outputs(self) -> None:
+        """Hook for output-count checks (ISSM: ``n_states >= n_outputs``)."""
+
+    def _after_fit(self, train: _Data) -> None:
+        """Hook run once the weights are chosen."""
+
+    def _split_validation(self, Xs, ys, min_len):
+        """Hold out whole sequences, or the tail block of a single one."""
+        if len(Xs) >= 3:
+            n_val = max(1, int(round(self.validation_fraction * len(Xs))))
+            return Xs[:-n_val], ys[:-n_val], Xs[-n_val:], ys[-n_val:]
+        n = len(Xs[-1])
+        n_val = int(round(self.validation_fraction * n))
+        if n_val < min_len or n - n_val < min_len:
+            # Too short to split: validate on the training data itself.
+            return Xs, ys, None, None
+        head = [*Xs[:-1], Xs[-1][:-n_val]]
+        yhead = [*ys[:-1], ys[-1][:-n_val]]
+        return head, yhead, [Xs[-1][-n_val:]], [ys[-1][-n_val:]]
+
+    def _stages(self) -> list[tuple[int, int]]:
+        """``(segment length, iterations)`` of each training stage."""
+        if self.focus == "prediction":
+            return [(1, self.max_iter)]
+        one = max(1, int(round(_ONE_STEP_SHARE * self.max_iter)))
+        shoot = max(1, int(round(_SHOOTING_SHARE * self.max_iter)))
+        stages = [(1, one)]
+        stages += [(int(s), shoot) for s in sorted(self.shooting_segments)]
+        stages.append((_FREE_RUN, self.max_iter))
+        return stages
+
+    def _fit_one(self, train: _Data, val: _Data | None, seed: int, k: int):
+        """One restart through the whole schedule; returns a :class:`_Run`."""
+        rng = np.random.RandomState(seed)
+        w = self._initial_params(rng)
+        mask = self._penalty_mask()
+        n_res = len(train.modelled) * self.n_outputs_
+        stages = self._stages()
+        final_seg = stages[-1][0]
+        tracker = _Tracker(self, val, final_seg, w)
+        converged = True
+        n_iter = 0
+        for i_stage, (seg, iters) in enumerate(stages):
+            last = i_stage == len(stages) - 1
+            tracker.patience = self.n_iter_no_change if last else None
+            objective = _Objective(self, train, seg, mask, n_res)
+            if not np.isfinite(objective.loss(w)):
+                continue  # the stage diverges from here on: skip it
+            w, nit, ok = _SOLVERS[self.solver](objective, w, iters, self.tol, tracker)
+            n_iter += nit
+            if last:
+                converged = ok or tracker.stopped
+            if self.verbose:
+                print(
+                    f"[{type(self).__name__}] restart {k} stage {i_stage} "
+                    f"(segment {'free run' if seg == _FREE_RUN else seg}): "
+                    f"{nit} iterations, loss {objective.loss(w):.3e}, "
+                    f"validation {tracker.best_loss:.3e}"
+                )
+        if val is not None:
+            w = tracker.best_w
+            val_loss = tracker.best_loss
+        else:
+            val_loss = np.nan
+        loss = _Objective(self, train, final_seg, mask, n_res).loss(w)
+        score = val_loss if val is not None else loss
+        return _Run(w, loss, val_loss, score if np.isfinite(score) else np.inf, n_iter, converged)
+
+    # ----------------------------------------------------------- predicting
+    def _simulate(self, X, initial, initial_name: str):
+        check_is_fitted(self, "coefs_")
+        Xs, _, as_list, _ = self._validate_Xy(X, reset=False, y_required=False)
+        self._check_lengths(Xs, 1)
+        initial = self._check_initial(initial, len(Xs), as_list, initial_name)
+        data = self._stack(Xs, None, initial)
+        Yhat, _, diverged, _ = self._run(self.coefs_, data, _FREE_RUN, False)
+        self._warn_divergence(diverged, as_list)
+        return self._unstack(Yhat, data, as_list, self._y_1d)
+
+    def predict(self, X, y=None, *, horizon=1):
+        """Predict the response, from measured outputs when they are given.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs) or list of such
+            Excitation.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list, \
+default=None
+            Measured response. With it, the ``horizon``-step-ahead prediction
+            is returned: every value uses measurements up to ``t - horizon``
+            (``horizon=1`` is the one-step predictor of the paper, section
+            4.3). Without it nothing is measured and the free-run simulation
+            from zero initial conditions is returned (section 4.4); this is
+            what :meth:`score` and scikit-learn's model selection see.
+        horizon : int, default=1
+            Prediction horizon in samples (only used with ``y``).
+
+        Returns
+        -------
+        y_pred : ndarray or list of ndarray
+            Same shape as ``y`` (or as the training targets); a list for a
+            list.
+        """
+        if y is None:
+            return self._simulate(X, None, "initial")
+        check_is_fitted(self, "coefs_")
+        if not isinstance(horizon, numbers.Integral) or horizon < 1:
+            raise ValueError(f"horizon must be a positive integer; got {horizon!r}.")
+        Xs, ys, as_list, y_1d = self._validate_Xy(X, y, reset=False, y_required=True)
+        self._check_lengths(Xs, 1)
+        data = self._stack(Xs, ys)
+        Yhat = self._run_horizon(self.coefs_, data, int(horizon))
+        return self._unstack(Yhat, data, as_list, y_1d)
+
+    def score(self, X, y, sample_weight=None):
+        """Coefficient of determination R^2 of the free-run simulation.
+
+        The model is simulated from the excitation alone (zero initial
+        conditions) and compared with the measured response over all samples
+        of all sequences. A diverged simulation scores ``-inf``.
+
+        Parameters
+        ----------
+        X : array-like of shape (n_samples, n_inputs) or list of such
+            Excitation.
+        y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list
+            Measured response.
+        sample_weight : array-like of shape (n_samples,), default=None
+            Sample weights (one array only).
+
+        Returns
+        -------
+        score : float
+            R^2 averaged uniformly over outputs.
+        """
+        from sklearn.metrics import r2_score
+
+        y_pred = self.predict(X)
+        y_true = np.concatenate(y) if isinstance(y, (list, tuple)) and not np.isscalar(y[0]) else y
+        y_pred = np.concatenate(y_pred) if isinstance(y_pred, list) else y_pred
+        if not np.all(np.isfinite(y_pred)):
+            return -np.inf
+        return r2_score(y_true, y_pred, sample_weight=sample_weight)
+
+    def _check_initial(self, initial, n_seq: int, as_list: bool, name: str):
+        return initial  # subclasses validate their own initial conditions
+
+    def _warn_divergence(self, diverged: np.ndarray, as_list: bool) -> None:
+        for s, t in enumerate(diverged):
+            if t >= 0:
+                where = f"sequence {s}, " if as_list else ""
+                warnings.warn(
+                    f"The free run of {type(self).__name__} diverged at {where}sample "
+                    f"{t}: its output left {_DIVERGENCE_FACTOR:g} times the training "
+                    "range. Values from there on are NaN.",
+                    DivergenceWarning,
+                    stacklevel=3,
+                )
+
+
+def _mean_scale(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    mean = a.mean(axis=0)
+    scale = a.std(axis=0)
+    scale[scale < 1e-12 * np.maximum(1.0, np.abs(mean))] = 1.0
+    scale[scale == 0.0] = 1.0
+    return mean, scale
+
+
+@dataclass
+class _Run:
+    w: np.ndarray
+    loss: float
+    val_loss: float
+    score: float
+    n_iter: int
+    converged: bool
+
+
+class _Objective:
+    """Least-squares objective of one training stage (standardised units).
+
+    ``0.5 * mean(r**2) + 0.5 * alpha / n_res * ||w_masked||**2``, where ``r``
+    are the errors of the recurrence restarted every ``seg`` samples.
+    """
+
+    def __init__(self, est, data: _Data, seg: int, mask: np.ndarray, n_res: int):
+        self.est, self.data, self.seg, self.mask = est, data, seg, mask
+        self.rows = data.modelled
+        self.root_n = np.sqrt(n_res)
+        self.root_alpha = np.sqrt(est.alpha)
+        self._cache_w = None
+
+    def _forward(self, w, want_jac):
+        if (
+            self._cache_w is not None
+            and np.array_equal(w, self._cache_w)
+            and (self._cache[1] is not None or not want_jac)
+        ):
+            return self._cache
+        result = self.est._run(w, self.data, self.seg, want_jac)
+        self._cache_w, self._cache = w.copy(), result
+        return result
+
+    def residuals(self, w):
+        Yhat, _, diverged, _ = self._forward(w, False)
+        r = (Yhat[self.rows] - self.data.Y[self.rows]).ravel() / self.root_n
+        if (diverged >= 0).any():
+            r = np.full_like(r, np.inf)
+        if self.root_alpha > 0:
+            r = np.concatenate([r, self.root_alpha / self.root_n * w[self.mask]])
+        return r
+
+    def jacobian(self, w):
+        _, J, _, _ = self._forward(w, True)
+        J = J / self.root_n
+        if self.root_alpha > 0:
+            P = np.zeros((int(self.mask.sum()), len(w)))
+            P[np.arange(P.shape[0]), np.flatnonzero(self.mask)] = self.root_alpha / self.root_n
+            J = np.vstack([J, P])
+        return J
+
+    def loss(self, w):
+        r = self.residuals(w)
+        return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf
+
+    def loss_and_grad(self, w):
+        Yhat, _, diverged, state = self._forward(w, False)
+        if (diverged >= 0).any():
+            return np.inf, np.zeros_like(w)
+        r = (Yhat[self.rows] - self.data.Y[self.rows]).ravel()
+        n = self.root_n**2
+        grad = self.est._gradient(w, self.data, self.seg, state) / n
+        loss = 0.5 * float(r @ r) / n
+        if self.root_alpha > 0:
+            wm = np.where(self.mask, w, 0.0)
+            loss += 0.5 * self.est.alpha / n * float(wm @ wm)
+            grad += self.est.alpha / n * wm
+        return loss, grad
+
+
+class _Tracker:
+    """Keeps the weights with the best validation loss seen after each step."""
+
+    def __init__(self, est, val: _Data | None, seg: int, w0: np.ndarray):
+        self.est, self.val, self.seg = est, val, seg
+        self.best_w = w0.copy()
+        self.best_loss = np.inf
+        self.patience = None
+        self.since_best = 0
+        self.stopped = False
+        self(w0)
+
+    def __call__(self, w) -> None:
+        if self.val is None:
+            return
+        Yhat, _, diverged, _ = self.est._run(w, self.val, self.seg, False)
+        rows = self.val.modelled
+        loss = np.inf
+        if not (diverged >= 0).any():
+            e = Yhat[rows] - self.val.Y[rows]
+            loss = float(np.mean(e * e))
+        if loss < self.best_loss:
+            self.best_loss, self.best_w, self.since_best = loss, w.copy(), 0
+        else:
+            self.since_best += 1
+            if self.patience is not None and self.since_best >= self.patience:
+                self.stopped = True
+                raise _EarlyStop
+
+
+def _solve_lm(objective: _Objective, w, iters, tol, tracker):
+    """Levenberg-Marquardt with the exact recurrent Jacobian.
+
+    Marquardt's scale-invariant damping ``mu * diag(J'J)`` and Nielsen's
+    update of ``mu``. The normal equations are solved directly: the problems
+    here have many residuals and few weights, where ``J'J`` costs a fraction
+    of the SVD a general trust-region solver takes. A step whose run diverges
+    has infinite cost and is rejected like any other bad step. The tracker
+    sees the weights after every accepted step. Returns ``(w, n_evaluations,
+    converged)``.
+    """
+    r = objective.residuals(w)
+    cost = 0.5 * float(r @ r)
+    J = objective.jacobian(w)
+    A, g = J.T @ J, J.T @ r
+    mu, nu = 1e-3, 2.0
+    tracker.stopped = False
+    n_eval = 0
+    try:
+        while n_eval < iters:
+            if np.max(np.abs(g)) <= tol * max(1.0, cost):
+                return w, n_eval, True
+            d = np.maximum(np.diag(A), 1e-12 * max(1.0, np.max(np.diag(A))))
+            try:
+                step = -np.linalg.solve(A + mu * np.diag(d), g)
+            except np.linalg.LinAlgError:
+                mu, nu = mu * nu, nu * 2.0
+                n_eval += 1
+                continue
+            if np.linalg.norm(step) <= tol * (np.linalg.norm(w) + tol):
+                return w, n_eval, True
+            w_new = w + step
+            r_new = objective.residuals(w_new)
+            n_eval += 1
+            cost_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
+            predicted = 0.5 * float(step @ (mu * d * step - g))
+            rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
+            if rho > 0:
+                small = cost - cost_new <= tol * cost
+                w, r, cost = w_new, r_new, cost_new
+                J = objective.jacobian(w)
+                A, g = J.T @ J, J.T @ r
+                tracker(w)
+                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+                nu = 2.0
+                if small:
+                    return w, n_eval, True
+            else:
+                mu, nu = mu * nu, nu * 2.0
+    except _EarlyStop:
+        return w, n_eval, True
+    return w, n_eval, False
+
+
+def _solve_minimize(method):
+    def solve(objective: _Objective, w, iters, tol, tracker):
+        count = {"n": 0, "x": w}
+
+        def callback(xk):
+            count["n"] += 1
+            count["x"] = np.array(xk, copy=True)
+            tracker(xk)
+
+        tracker.stopped = False
+        options = {"maxiter": iters}
+        if method == "L-BFGS-B":
+            options["gtol"] = tol
+        try:
+            res = minimize(
+                objective.loss_and_grad, w, jac=True, method=method, tol=tol,
+                callback=callback, options=options,
+            )  # fmt: skip
+        except _EarlyStop:
+            return count["x"], count["n"], True
+        return res.x, int(res.nit), bool(res.success)
+
+    return solve
+
+
+_SOLVERS = {
+    "lm": _solve_lm,
+    "lbfgs": _solve_minimize("L-BFGS-B"),
+    "slsqp": _solve_minimize("SLSQP"),
+}

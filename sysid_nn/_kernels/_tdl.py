@@ -1,0 +1,212 @@
+"""Tapped-delay-line recurrence (paper eq. 4-6) with exact sensitivities.
+
+Data layout shared by every kernel here: all sequences are stacked in ``Y``
+(``(n_rows, n_outputs)``) and ``U`` (``(n_rows, n_inputs)``); sequence ``s``
+occupies rows ``starts[s]:starts[s + 1]``, whose first ``h`` rows are its
+history (the initial conditions) and the rest are modelled. The regressor at
+row ``t`` is
+
+``phi = [y(t-1), ..., y(t-na), u(t-nk), ..., u(t-nk-nb+1)]``
+
+(each block over all channels), the network sees ``z = S @ phi`` and
+returns ``y(t)``. Within a segment of ``seg_len`` modelled rows the network
+is fed its own outputs; at each segment start it restarts from measured
+values, so ``seg_len = 1`` is the one-step predictor, a length beyond the
+sequence is the free run and anything between is multiple shooting.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp
+
+
+@njit(cache=True, inline="always")
+def _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi):
+    n_out = Y.shape[1]
+    n_in = U.shape[1]
+    for i in range(1, na + 1):
+        src = t - i
+        for k in range(n_out):
+            phi[(i - 1) * n_out + k] = Yhat[src, k] if src >= seg_start else Y[src, k]
+    base = na * n_out
+    for i in range(nb):
+        for k in range(n_in):
+            phi[base + i * n_in + k] = U[t - nk - i, k]
+
+
+@njit(cache=True, inline="always")
+def _matvec(S, x, out):
+    for r in range(S.shape[0]):
+        s = 0.0
+        for c in range(S.shape[1]):
+            s += S[r, c] * x[c]
+        out[r] = s
+
+
+@njit(cache=True, inline="always")
+def _rmatvec(S, x, out):
+    for c in range(S.shape[1]):
+        out[c] = 0.0
+    for r in range(S.shape[0]):
+        xr = x[r]
+        if xr != 0.0:
+            for c in range(S.shape[1]):
+                out[c] += S[r, c] * xr
+
+
+@njit(cache=True, inline="always")
+def _out_of_range(out, bound):
+    for j in range(out.shape[0]):
+        if not np.abs(out[j]) <= bound:  # also catches NaN
+            return True
+    return False
+
+
+@njit(cache=True)
+def tdl_run(
+    w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, want_jac,
+    Yhat, J, Z, A, diverged,
+):  # fmt: skip
+    """Run the recurrence; optionally fill the Jacobian of the modelled rows.
+
+    ``Yhat`` receives the outputs (history rows copied from ``Y``; NaN after
+    a divergence). ``J`` (``(n_modelled_rows * n_out, n_w)``) receives
+    ``d yhat / d w`` by forward sensitivities when ``want_jac``. ``Z`` and
+    ``A`` (per-row network inputs and hidden activations) are kept for the
+    adjoint pass. ``diverged[s]`` is the first modelled index of sequence
+    ``s`` whose output left ``[-bound, bound]``, or -1.
+    """
+    n_out = Y.shape[1]
+    n_reg = S.shape[1]
+    n_z = sizes[0]
+    n_w = w.shape[0]
+    width = np.max(sizes)
+    phi = np.empty(n_reg)
+    out = np.empty(n_out)
+    v = np.zeros(n_out)
+    gz = np.empty(n_z)
+    gphi = np.empty(n_reg)
+    d1 = np.empty(width)
+    d2 = np.empty(width)
+    row_base = 0
+    for s in range(starts.shape[0] - 1):
+        a = starts[s]
+        b = starts[s + 1]
+        diverged[s] = -1
+        for t in range(a, a + h):
+            for k in range(n_out):
+                Yhat[t, k] = Y[t, k]
+        seg_start = a + h
+        for t in range(a + h, b):
+            if (t - a - h) % seg_len == 0:
+                seg_start = t
+            _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi)
+            _matvec(S, phi, Z[t])
+            mlp_forward(w, sizes, act, bypass, Z[t], A[t], out)
+            if _out_of_range(out, bound):
+                diverged[s] = t - a - h
+                for tt in range(t, b):
+                    for k in range(n_out):
+                        Yhat[tt, k] = np.nan
+                break
+            for k in range(n_out):
+                Yhat[t, k] = out[k]
+            if not want_jac:
+                continue
+            r0 = row_base + (t - a - h) * n_out
+            for j in range(n_out):
+                row = r0 + j
+                for c in range(n_w):
+                    J[row, c] = 0.0
+                v[:] = 0.0
+                v[j] = 1.0
+                mlp_vjp(w, sizes, act, bypass, Z[t], A[t], v, J[row], gz, d1, d2)
+                _rmatvec(S, gz, gphi)
+                # Eq. 6 carried through the delay line: add the sensitivities
+                # of the fed-back outputs of this segment.
+                for i in range(1, na + 1):
+                    src = t - i
+                    if src < seg_start:
+                        break
+                    srow = row_base + (src - a - h) * n_out
+                    for k in range(n_out):
+                        coef = gphi[(i - 1) * n_out + k]
+                        if coef != 0.0:
+                            for c in range(n_w):
+                                J[row, c] += coef * J[srow + k, c]
+        row_base += (b - a - h) * n_out
+
+
+@njit(cache=True)
+def tdl_gradient(
+    w, sizes, act, bypass, S, Y, starts, h, na, seg_len, Yhat, Z, A, grad,
+):  # fmt: skip
+    """Adjoint (backpropagation-through-time) gradient of ``0.5 ||Yhat - Y||^2``.
+
+    Needs the ``Yhat``, ``Z`` and ``A`` of a completed :func:`tdl_run`
+    without divergence; adds the gradient to ``grad``.
+    """
+    n_out = Y.shape[1]
+    n_reg = S.shape[1]
+    n_z = sizes[0]
+    width = np.max(sizes)
+    gz = np.empty(n_z)
+    gphi = np.empty(n_reg)
+    d1 = np.empty(width)
+    d2 = np.empty(width)
+    adj = np.empty((Y.shape[0], n_out))
+    for s in range(starts.shape[0] - 1):
+        a = starts[s]
+        b = starts[s + 1]
+        for t in range(a + h, b):
+            for k in range(n_out):
+                adj[t, k] = Yhat[t, k] - Y[t, k]
+        for t in range(b - 1, a + h - 1, -1):
+            seg_start = a + h + ((t - a - h) // seg_len) * seg_len
+            mlp_vjp(w, sizes, act, bypass, Z[t], A[t], adj[t], grad, gz, d1, d2)
+            _rmatvec(S, gz, gphi)
+            for i in range(1, na + 1):
+                src = t - i
+                if src < seg_start:
+                    break
+                for k in range(n_out):
+                    adj[src, k] += gphi[(i - 1) * n_out + k]
+
+
+@njit(cache=True)
+def tdl_predict_horizon(
+    w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, horizon, Yhat,
+):  # fmt: skip
+    """Sliding ``horizon``-step-ahead predictor.
+
+    Each modelled ``Yhat[t]`` is the network run from measured outputs up to
+    ``t - horizon`` (history rows count as measured); no value sees a later
+    measurement.
+    """
+    n_out = Y.shape[1]
+    n_reg = S.shape[1]
+    n_z = sizes[0]
+    phi = np.empty(n_reg)
+    z = np.empty(n_z)
+    acts = np.empty(max(1, np.sum(sizes[1:-1])))
+    out = np.empty(n_out)
+    work = np.empty_like(Y)
+    for s in range(starts.shape[0] - 1):
+        a = starts[s]
+        b = starts[s + 1]
+        for t in range(a, a + h):
+            for k in range(n_out):
+                Yhat[t, k] = Y[t, k]
+        for t in range(a + h, b):
+            first = max(t - horizon + 1, a + h)
+            for tt in range(first, t + 1):
+                _regressor(work, Y, U, tt, first, na, nb, nk, phi)
+                _matvec(S, phi, z)
+                mlp_forward(w, sizes, act, bypass, z, acts, out)
+                for k in range(n_out):
+                    work[tt, k] = out[k]
+            for k in range(n_out):
+                Yhat[t, k] = work[t, k]
