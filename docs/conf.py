@@ -85,6 +85,11 @@ pygments_style = "sphinx"
 math_number_all = False
 math_eqref_format = "({number})"
 
+# MathJax is loaded by the reader's browser from a CDN; a local copy can be
+# used instead (offline reading) by pointing this variable to it.
+if os.environ.get("SYSID_NN_DOCS_MATHJAX_PATH"):
+    mathjax_path = os.environ["SYSID_NN_DOCS_MATHJAX_PATH"]
+
 # -- autodoc / autosummary / numpydoc -----------------------------------------
 
 autosummary_generate = True
@@ -292,6 +297,8 @@ sphinx_gallery_conf = {
     "min_reported_time": 1,
     "show_signature": False,
     "matplotlib_animations": False,
+    # The timing tables load jQuery and DataTables from a CDN; leave them out.
+    "write_computation_times": False,
 }
 
 # -- HTML output ---------------------------------------------------------------
