@@ -290,8 +290,6 @@ sphinx_gallery_conf = {
     "download_all_examples": False,
     "remove_config_comments": True,
     "doc_module": ("sysid_nn",),
-    # Only the project's own names are linked; nothing is fetched.
-    "reference_url": {"sysid_nn": None},
     "backreferences_dir": "generated/backreferences",
     "show_memory": False,
     "min_reported_time": 1,
