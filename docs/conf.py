@@ -98,6 +98,19 @@ autosummary_imported_members = False
 autodoc_typehints = "none"
 autodoc_member_order = "groupwise"
 
+# Summaries often cite the paper ("... (paper eq. 13-15)."): do not let the
+# summary tables of autosummary cut the first sentence after "eq.".
+import sphinx.ext.autosummary as _autosummary
+
+_autosummary.WELL_KNOWN_ABBREVIATIONS = (
+    *_autosummary.WELL_KNOWN_ABBREVIATIONS,
+    "eq.",
+    "eqs.",
+    "fig.",
+    "figs.",
+    "cf.",
+)
+
 numpydoc_show_class_members = False
 numpydoc_class_members_toctree = False
 numpydoc_attributes_as_param_list = True
