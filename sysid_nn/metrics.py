@@ -246,6 +246,7 @@ def r2(
     Returns
     -------
     float or ndarray of shape (n_outputs,)
+        1 for a perfect model, 0 for the mean; NaN propagates from ``y_pred``.
 
     Examples
     --------
@@ -292,6 +293,12 @@ class ErrorStatistics:
         Sampling step of the errors.
     method : str
         Quadrature rule of the time integrals.
+
+    Examples
+    --------
+    >>> stats = error_statistics([[0.0, 2.0], [1.0, 1.0]])
+    >>> stats.summary.tolist()
+    [1.0, 0.7071067811865476, 2.0, 0.0]
     """
 
     mu: float
@@ -326,7 +333,14 @@ class ErrorStatistics:
         )
 
     def to_frame(self) -> pd.DataFrame:
-        """One row per realisation: mean, std, samples, duration, divergent."""
+        """Return the per-realisation statistics.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per realisation, columns ``mean, std, n_samples,
+            duration, divergent``.
+        """
         return pd.DataFrame(
             {
                 "mean": self.means,

@@ -97,6 +97,7 @@ def plot_records(
     Returns
     -------
     matplotlib.figure.Figure
+        Figure with the excitation (top) and displacement (bottom) panels.
 
     Examples
     --------
@@ -152,6 +153,7 @@ def plot_response(
     Returns
     -------
     matplotlib.axes.Axes
+        The Axes drawn on, with a legend.
 
     Examples
     --------
@@ -247,6 +249,7 @@ def plot_cross_correlation(
     Returns
     -------
     matplotlib.axes.Axes
+        One line per input over the lags, two dotted band lines.
 
     Examples
     --------
@@ -280,7 +283,7 @@ def plot_error_statistics(
     title: str = "Error statistics",
     ax: Axes | None = None,
 ) -> Axes:
-    """Bars of ``mu_Ns`` and ``sigma_Ns`` for several models (figs 4.5, 4.7).
+    """Draw bars of ``mu_Ns`` and ``sigma_Ns`` for several models (figs 4.5, 4.7).
 
     Parameters
     ----------
@@ -336,7 +339,7 @@ def plot_hysteresis(
     ylabel: str = "restoring force",
     ax: Axes | None = None,
 ) -> Axes:
-    """Hysteresis loop: restoring force (or hysteretic state) vs displacement.
+    """Draw a hysteresis loop: restoring force (or hysteretic state) vs displacement.
 
     Parameters
     ----------
@@ -355,6 +358,7 @@ def plot_hysteresis(
     Returns
     -------
     matplotlib.axes.Axes
+        The Axes drawn on, with a legend.
 
     Examples
     --------
@@ -416,6 +420,23 @@ def plot_residual_analysis(
     Returns
     -------
     matplotlib.figure.Figure
+        Two panels: autocorrelation (top), cross-correlation (bottom).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sysid_nn.residuals import analyze_residuals
+    >>> class Zero:
+    ...     def simulate(self, X):
+    ...         return np.zeros(len(X))
+    >>> rng = np.random.default_rng(0)
+    >>> report = analyze_residuals(Zero(), rng.standard_normal((300, 1)),
+    ...                            rng.standard_normal(300), mode="simulation")
+    >>> fig = plot_residual_analysis(report)
+    >>> [ax.get_ylabel() for ax in fig.axes]
+    ['r_ee(τ) / r_ee(0)', 'r_eu(τ)']
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close(fig)
     """
     key = (sequence, output)
     if key not in analysis.whiteness:

@@ -42,7 +42,7 @@ tests", *Int. J. Control* 60(6), 1994.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
@@ -193,6 +193,16 @@ class CorrelationTest:
         Significance level.
     n_samples : int
         Number of samples ``N`` (pooled over sequences).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> res = nonlinear_correlation_tests(rng.standard_normal(500),
+    ...                                   rng.standard_normal(500), max_lag=5)
+    >>> test = res.get("phi_u2e")
+    >>> test.dof, test.lags.tolist()
+    (11, [-5, -4, -3, -2, -1, 0, 1, 2, 3, 4, 5])
     """
 
     name: str
@@ -217,7 +227,13 @@ class CorrelationTest:
         return int(np.sum(np.abs(self.values) > self.band))
 
     def to_frame(self) -> pd.DataFrame:
-        """Tidy frame: test, input, lag, value, lower, upper, outside."""
+        """Return the correlation function with its band as a tidy frame.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Columns ``test, input, lag, value, lower, upper, outside``.
+        """
         return pd.DataFrame(
             {
                 "test": self.name,
@@ -291,6 +307,13 @@ class WhitenessResult:
         Significance level.
     n_samples : int
         ``N`` (pooled over sequences).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> res = whiteness_test(np.random.default_rng(0).standard_normal(500), 10)
+    >>> res.summary[["dof", "passed"]].tolist()
+    [10, True]
     """
 
     lags: np.ndarray
@@ -326,7 +349,14 @@ class WhitenessResult:
         )
 
     def to_frame(self) -> pd.DataFrame:
-        """Autocorrelation by lag with the band (columns acf, lower, upper, outside)."""
+        """Return the autocorrelation by lag with its band.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Indexed by ``lag``; columns ``acf, lower, upper, outside``
+            (``outside`` is False at lag 0, which is not tested).
+        """
         outside = np.abs(self.acf) > self.band
         outside[self.lags == 0] = False  # r(0) = 1 by definition, not a test lag
         return pd.DataFrame(
@@ -434,6 +464,15 @@ class CrossCorrelationResult:
         Significance level.
     n_samples : int
         ``N`` (pooled over sequences).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> res = cross_correlation_test(rng.standard_normal(500),
+    ...                              rng.standard_normal((500, 2)), max_lag=5)
+    >>> res.ccf.shape, res.summary.shape
+    ((11, 2), (4, 8))
     """
 
     lags: np.ndarray
@@ -477,7 +516,13 @@ class CrossCorrelationResult:
         return pd.DataFrame(rows).sort_values(["input", "side"], ignore_index=True)
 
     def to_frame(self) -> pd.DataFrame:
-        """Tidy frame: input, lag, ccf, lower, upper, outside."""
+        """Return the cross-correlation of every input with its band.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Tidy, columns ``input, lag, ccf, lower, upper, outside``.
+        """
         n_lags, n_inputs = self.ccf.shape
         return pd.DataFrame(
             {
@@ -605,6 +650,15 @@ class NonlinearTestResult:
         Significance level.
     n_samples : int
         ``N`` (pooled over sequences).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> res = nonlinear_correlation_tests(rng.standard_normal(500),
+    ...                                   rng.standard_normal(500), max_lag=5)
+    >>> res.summary["test"].tolist()
+    ['phi_ee', 'phi_ue', 'phi_u2e', 'phi_u2e2', 'phi_eeu']
     """
 
     tests: tuple[CorrelationTest, ...]
@@ -617,7 +671,21 @@ class NonlinearTestResult:
         return all(t.passed for t in self.tests)
 
     def get(self, name: str, input: int | None = None) -> CorrelationTest:
-        """The test called ``name`` (for input column ``input``)."""
+        """Look up one test by name and input column.
+
+        Parameters
+        ----------
+        name : str
+            One of ``"phi_ee"``, ``"phi_ue"``, ``"phi_u2e"``, ``"phi_u2e2"``,
+            ``"phi_eeu"``.
+        input : int, optional
+            Input column (default 0); ignored for ``"phi_ee"``.
+
+        Returns
+        -------
+        CorrelationTest
+            The matching test.
+        """
         for t in self.tests:
             if t.name == name and (name == "phi_ee" or t.input == (input or 0)):
                 return t
@@ -645,7 +713,13 @@ class NonlinearTestResult:
         )
 
     def to_frame(self) -> pd.DataFrame:
-        """Tidy frame of all correlation functions: test, input, lag, value, band."""
+        """Return all correlation functions with their bands.
+
+        Returns
+        -------
+        pandas.DataFrame
+            Tidy, columns ``test, input, lag, value, lower, upper, outside``.
+        """
         return pd.concat([t.to_frame() for t in self.tests], ignore_index=True)
 
 
@@ -773,6 +847,19 @@ class ResidualAnalysis:
         ``"prediction"`` or ``"simulation"``.
     horizon : int
         Prediction horizon (prediction mode).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> class Zero:
+    ...     def simulate(self, X):
+    ...         return np.zeros(len(X))
+    >>> rng = np.random.default_rng(0)
+    >>> report = analyze_residuals(Zero(), rng.standard_normal((300, 1)),
+    ...                            rng.standard_normal(300), mode="simulation",
+    ...                            max_lag=5)
+    >>> report.passed, sorted(report.whiteness)
+    (True, [(0, 0)])
     """
 
     residuals: Any
@@ -783,7 +870,6 @@ class ResidualAnalysis:
     divergent: tuple[int, ...]
     mode: str
     horizon: int
-    _default_sequence: int | str = field(default=0, repr=False)
 
     @property
     def passed(self) -> bool:
@@ -791,10 +877,14 @@ class ResidualAnalysis:
         return bool(self.summary["passed"].all())
 
     def to_frame(self) -> pd.DataFrame:
-        """Tidy frame of all correlation functions with their bands.
+        """Return all correlation functions with their bands.
 
-        Columns ``sequence, output, test, input, lag, value, lower, upper,
-        outside``; ``test`` is ``"acf"``, ``"r_eu"`` or a non-linear test name.
+        Returns
+        -------
+        pandas.DataFrame
+            Tidy, columns ``sequence, output, test, input, lag, value, lower,
+            upper, outside``; ``test`` is ``"acf"``, ``"r_eu"`` or a
+            non-linear test name.
         """
         frames = []
         for (seq, out), w in self.whiteness.items():
@@ -827,10 +917,13 @@ class ResidualAnalysis:
         Returns
         -------
         matplotlib.figure.Figure
+            Two panels: autocorrelation and cross-correlation with bands.
         """
         from sysid_nn.plotting import plot_residual_analysis
 
-        seq = self._default_sequence if sequence is None else sequence
+        if sequence is None:
+            sequence = "pooled" if isinstance(self.residuals, list) else 0
+        seq = sequence
         return plot_residual_analysis(self, sequence=seq, output=output)
 
 
@@ -1038,5 +1131,4 @@ def analyze_residuals(
         divergent=divergent,
         mode=mode,
         horizon=int(horizon),
-        _default_sequence="pooled" if is_list else 0,
     )
