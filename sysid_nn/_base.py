@@ -74,7 +74,10 @@ class _Data:
     def modelled(self) -> np.ndarray:
         """Row indices of the modelled (non-history) rows."""
         return np.concatenate(
-            [np.arange(a + self.h, b) for a, b in zip(self.starts[:-1], self.starts[1:])]
+            [
+                np.arange(a + self.h, b)
+                for a, b in zip(self.starts[:-1], self.starts[1:], strict=True)
+            ]
         )
 
     @property
@@ -94,7 +97,9 @@ def _as_sequence_list(X, name: str):
                 "(a 2-D array of shape (n_samples, n_features))."
             )
         first = X[0]
-        if np.isscalar(first) or (isinstance(first, (list, tuple)) and np.isscalar(first[0])):
+        if np.isscalar(first) or (
+            isinstance(first, (list, tuple)) and np.isscalar(first[0])
+        ):
             # A plain nested list is one array, as in scikit-learn.
             return [X], False
         return list(X), True
@@ -158,20 +163,28 @@ class _RecurrentRegressorBase(BaseEstimator):
         """Fix data-dependent structure and the linear starting point."""
         raise NotImplementedError
 
-    def _initial_params(self, rng: np.random.RandomState) -> np.ndarray:  # pragma: no cover
+    def _initial_params(
+        self, rng: np.random.RandomState
+    ) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
     def _run(self, w, data: _Data, seg_len: int, want_jac: bool):  # pragma: no cover
         """Return ``(Yhat, J or None, diverged, state_for_gradient)``."""
         raise NotImplementedError
 
-    def _gradient(self, w, data: _Data, seg_len: int, state) -> np.ndarray:  # pragma: no cover
+    def _gradient(
+        self, w, data: _Data, seg_len: int, state
+    ) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
-    def _run_horizon(self, w, data: _Data, horizon: int) -> np.ndarray:  # pragma: no cover
+    def _run_horizon(
+        self, w, data: _Data, horizon: int
+    ) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
-    def _history(self, n_seq: int, initial) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    def _history(
+        self, n_seq: int, initial
+    ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
         """Standardised history rows ``(Y_hist, U_hist)`` for every sequence."""
         raise NotImplementedError
 
@@ -221,9 +234,12 @@ class _RecurrentRegressorBase(BaseEstimator):
             if y is not None:
                 yi = y_list[i]
                 yi = check_array(
-                    yi, dtype=np.float64, ensure_2d=False, ensure_all_finite=False,
+                    yi,
+                    dtype=np.float64,
+                    ensure_2d=False,
+                    ensure_all_finite=False,
                     input_name="y",
-                )  # fmt: skip
+                )
                 if yi.ndim not in (1, 2):
                     raise ValueError(
                         f"y must be 1-D (n_samples,) or 2-D (n_samples, n_outputs); "
@@ -302,7 +318,7 @@ class _RecurrentRegressorBase(BaseEstimator):
 
     def _unstack(self, Yhat: np.ndarray, data: _Data, as_list: bool, y_1d: bool):
         out = []
-        for a, b in zip(data.starts[:-1], data.starts[1:]):
+        for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
             yi = Yhat[a + data.h : b] * self._y_scale + self._y_mean
             out.append(yi[:, 0] if y_1d else yi)
         return out if as_list else out[0]
@@ -411,10 +427,10 @@ class _RecurrentRegressorBase(BaseEstimator):
     def _split_validation(self, Xs, ys, min_len):
         """Hold out whole sequences, or the tail block of a single one."""
         if len(Xs) >= 3:
-            n_val = max(1, int(round(self.validation_fraction * len(Xs))))
+            n_val = max(1, round(self.validation_fraction * len(Xs)))
             return Xs[:-n_val], ys[:-n_val], Xs[-n_val:], ys[-n_val:]
         n = len(Xs[-1])
-        n_val = int(round(self.validation_fraction * n))
+        n_val = round(self.validation_fraction * n)
         if n_val < min_len or n - n_val < min_len:
             # Too short to split: validate on the training data itself.
             return Xs, ys, None, None
@@ -426,8 +442,8 @@ class _RecurrentRegressorBase(BaseEstimator):
         """``(segment length, iterations)`` of each training stage."""
         if self.focus == "prediction":
             return [(1, self.max_iter)]
-        one = max(1, int(round(_ONE_STEP_SHARE * self.max_iter)))
-        shoot = max(1, int(round(_SHOOTING_SHARE * self.max_iter)))
+        one = max(1, round(_ONE_STEP_SHARE * self.max_iter))
+        shoot = max(1, round(_SHOOTING_SHARE * self.max_iter))
         stages = [(1, one)]
         stages += [(int(s), shoot) for s in sorted(self.shooting_segments)]
         stages.append((_FREE_RUN, self.max_iter))
@@ -468,7 +484,14 @@ class _RecurrentRegressorBase(BaseEstimator):
             val_loss = np.nan
         loss = _Objective(self, train, final_seg, mask, n_res).loss(w)
         score = val_loss if val is not None else loss
-        return _Run(w, loss, val_loss, score if np.isfinite(score) else np.inf, n_iter, converged)
+        return _Run(
+            w,
+            loss,
+            val_loss,
+            score if np.isfinite(score) else np.inf,
+            n_iter,
+            converged,
+        )
 
     # ----------------------------------------------------------- predicting
     def _simulate(self, X, initial, initial_name: str):
@@ -540,7 +563,11 @@ default=None
         from sklearn.metrics import r2_score
 
         y_pred = self.predict(X)
-        y_true = np.concatenate(y) if isinstance(y, (list, tuple)) and not np.isscalar(y[0]) else y
+        y_true = (
+            np.concatenate(y)
+            if isinstance(y, (list, tuple)) and not np.isscalar(y[0])
+            else y
+        )
         y_pred = np.concatenate(y_pred) if isinstance(y_pred, list) else y_pred
         if not np.all(np.isfinite(y_pred)):
             return -np.inf
@@ -619,7 +646,9 @@ class _Objective:
         J = J / self.root_n
         if self.root_alpha > 0:
             P = np.zeros((int(self.mask.sum()), len(w)))
-            P[np.arange(P.shape[0]), np.flatnonzero(self.mask)] = self.root_alpha / self.root_n
+            P[np.arange(P.shape[0]), np.flatnonzero(self.mask)] = (
+                self.root_alpha / self.root_n
+            )
             J = np.vstack([J, P])
         return J
 
@@ -706,7 +735,9 @@ def _solve_lm(objective: _Objective, w, iters, tol, tracker):
             w_new = w + step
             r_new = objective.residuals(w_new)
             n_eval += 1
-            cost_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
+            cost_new = (
+                0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
+            )
             predicted = 0.5 * float(step @ (mu * d * step - g))
             rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
             if rho > 0:
@@ -741,9 +772,14 @@ def _solve_minimize(method):
             options["gtol"] = tol
         try:
             res = minimize(
-                objective.loss_and_grad, w, jac=True, method=method, tol=tol,
-                callback=callback, options=options,
-            )  # fmt: skip
+                objective.loss_and_grad,
+                w,
+                jac=True,
+                method=method,
+                tol=tol,
+                callback=callback,
+                options=options,
+            )
         except _EarlyStop:
             return count["x"], count["n"], True
         return res.x, int(res.nit), bool(res.success)

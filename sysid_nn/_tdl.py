@@ -203,6 +203,9 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     def __sklearn_tags__(self):
         return self._recurrent_tags(super().__sklearn_tags__())
 
+    # RegressorMixin precedes the base in the MRO: use the sequence-aware score.
+    score = _RecurrentRegressorBase.score
+
     # -------------------------------------------------------------- public
     def simulate(self, X, *, initial_outputs=None):
         """Free-run simulation from the excitation alone (paper section 4.4).
@@ -241,8 +244,12 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         return max(self.output_lags, self.input_delay + self.input_lags - 1)
 
     def _sizes(self) -> np.ndarray:
-        n_reg = self.output_lags * self.n_outputs_ + self.input_lags * self.n_features_in_
-        return np.array([n_reg, *self.hidden_layer_sizes, self.n_outputs_], dtype=np.int64)
+        n_reg = (
+            self.output_lags * self.n_outputs_ + self.input_lags * self.n_features_in_
+        )
+        return np.array(
+            [n_reg, *self.hidden_layer_sizes, self.n_outputs_], dtype=np.int64
+        )
 
     def _bypass(self) -> bool:
         # Without hidden layers the network is linear already.
@@ -346,7 +353,7 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         return w
 
     def _penalty_mask(self):
-        layers, end = self._layer_slices()
+        layers, _ = self._layer_slices()
         mask = np.zeros(n_params(self._sizes_, self._bypass()), dtype=bool)
         if len(layers) > 1:
             for ws, _ in layers:
@@ -362,26 +369,66 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         A = np.empty((n_rows, max(1, n_hidden(self._sizes_))))
         diverged = np.empty(len(data.starts) - 1, dtype=np.int64)
         tdl_run(
-            w, self._sizes_, self._act, self._bypass(), self._S, data.Y, data.U,
-            data.starts, data.h, self.output_lags, self.input_lags, self.input_delay,
-            min(seg_len, _FREE_RUN), self._bound, want_jac, Yhat, J, Z, A, diverged,
-        )  # fmt: skip
+            w,
+            self._sizes_,
+            self._act,
+            self._bypass(),
+            self._S,
+            data.Y,
+            data.U,
+            data.starts,
+            data.h,
+            self.output_lags,
+            self.input_lags,
+            self.input_delay,
+            min(seg_len, _FREE_RUN),
+            self._bound,
+            want_jac,
+            Yhat,
+            J,
+            Z,
+            A,
+            diverged,
+        )
         return Yhat, (J if want_jac else None), diverged, (Yhat, Z, A)
 
     def _gradient(self, w, data, seg_len, state):
         Yhat, Z, A = state
         grad = np.zeros(len(w))
         tdl_gradient(
-            w, self._sizes_, self._act, self._bypass(), self._S, data.Y, data.starts,
-            data.h, self.output_lags, seg_len, Yhat, Z, A, grad,
-        )  # fmt: skip
+            w,
+            self._sizes_,
+            self._act,
+            self._bypass(),
+            self._S,
+            data.Y,
+            data.starts,
+            data.h,
+            self.output_lags,
+            seg_len,
+            Yhat,
+            Z,
+            A,
+            grad,
+        )
         return grad
 
     def _run_horizon(self, w, data, horizon):
         Yhat = np.empty_like(data.Y)
         tdl_predict_horizon(
-            w, self._sizes_, self._act, self._bypass(), self._S, data.Y, data.U,
-            data.starts, data.h, self.output_lags, self.input_lags, self.input_delay,
-            horizon, Yhat,
-        )  # fmt: skip
+            w,
+            self._sizes_,
+            self._act,
+            self._bypass(),
+            self._S,
+            data.Y,
+            data.U,
+            data.starts,
+            data.h,
+            self.output_lags,
+            self.input_lags,
+            self.input_delay,
+            horizon,
+            Yhat,
+        )
         return Yhat

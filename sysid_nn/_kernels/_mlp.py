@@ -22,7 +22,10 @@ ACTIVATIONS = {"logistic": LOGISTIC, "tanh": TANH}
 
 def n_params(sizes: np.ndarray, bypass: bool) -> int:
     """Length of the flat parameter vector for layer ``sizes``."""
-    n = sum(int(sizes[i]) * int(sizes[i + 1]) + int(sizes[i + 1]) for i in range(len(sizes) - 1))
+    n = sum(
+        int(sizes[i]) * int(sizes[i + 1]) + int(sizes[i + 1])
+        for i in range(len(sizes) - 1)
+    )
     return n + (int(sizes[0]) * int(sizes[-1]) if bypass else 0)
 
 

@@ -67,9 +67,27 @@ def _out_of_range(out, bound):
 
 @njit(cache=True)
 def tdl_run(
-    w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, want_jac,
-    Yhat, J, Z, A, diverged,
-):  # fmt: skip
+    w,
+    sizes,
+    act,
+    bypass,
+    S,
+    Y,
+    U,
+    starts,
+    h,
+    na,
+    nb,
+    nk,
+    seg_len,
+    bound,
+    want_jac,
+    Yhat,
+    J,
+    Z,
+    A,
+    diverged,
+):
     """Run the recurrence; optionally fill the Jacobian of the modelled rows.
 
     ``Yhat`` receives the outputs (history rows copied from ``Y``; NaN after
@@ -142,8 +160,21 @@ def tdl_run(
 
 @njit(cache=True)
 def tdl_gradient(
-    w, sizes, act, bypass, S, Y, starts, h, na, seg_len, Yhat, Z, A, grad,
-):  # fmt: skip
+    w,
+    sizes,
+    act,
+    bypass,
+    S,
+    Y,
+    starts,
+    h,
+    na,
+    seg_len,
+    Yhat,
+    Z,
+    A,
+    grad,
+):
     """Adjoint (backpropagation-through-time) gradient of ``0.5 ||Yhat - Y||^2``.
 
     Needs the ``Yhat``, ``Z`` and ``A`` of a completed :func:`tdl_run`
@@ -178,8 +209,21 @@ def tdl_gradient(
 
 @njit(cache=True)
 def tdl_predict_horizon(
-    w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, horizon, Yhat,
-):  # fmt: skip
+    w,
+    sizes,
+    act,
+    bypass,
+    S,
+    Y,
+    U,
+    starts,
+    h,
+    na,
+    nb,
+    nk,
+    horizon,
+    Yhat,
+):
     """Sliding ``horizon``-step-ahead predictor.
 
     Each modelled ``Yhat[t]`` is the network run from measured outputs up to

@@ -1,0 +1,502 @@
+"""Tests of the TDL network and of the shared recurrent engine."""
+
+from __future__ import annotations
+
+import pickle
+import warnings
+
+import joblib
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.signal import lfilter
+from sklearn.base import clone
+from sklearn.exceptions import ConvergenceWarning, NotFittedError
+from sklearn.model_selection import GridSearchCV, KFold
+from sklearn.pipeline import make_pipeline
+from sklearn.preprocessing import FunctionTransformer
+from sklearn.utils.estimator_checks import parametrize_with_checks
+
+from sysid_nn import DivergenceWarning, TDLRegressor
+from sysid_nn._base import _FREE_RUN
+
+ROW_ORDER_CHECKS = {
+    "check_methods_subset_invariance": (
+        "rows are consecutive time steps of one experiment: a subset of rows is "
+        "a different experiment with different initial conditions"
+    ),
+    "check_methods_sample_order_invariance": (
+        "rows are consecutive time steps: reordering them changes the dynamics"
+    ),
+}
+
+
+def _narx(u: np.ndarray) -> np.ndarray:
+    """A small nonlinear ARX system used as ground truth."""
+    y = np.zeros(len(u))
+    for t in range(2, len(u)):
+        y[t] = (
+            0.6 * y[t - 1]
+            - 0.1 * y[t - 2]
+            + 0.8 * np.tanh(u[t - 1, 0])
+            + 0.2 * u[t - 2, 0] ** 2
+            - 0.1 * y[t - 1] ** 2
+        )
+    return y
+
+
+# ---------------------------------------------------------------------------
+# a slow NumPy twin of the kernels, written independently of them
+# ---------------------------------------------------------------------------
+def _unpack(model, w):
+    sizes = model._sizes_
+    mats, p = [], 0
+    for i in range(len(sizes) - 1):
+        W = w[p : p + sizes[i] * sizes[i + 1]].reshape(sizes[i + 1], sizes[i])
+        p += sizes[i] * sizes[i + 1]
+        b = w[p : p + sizes[i + 1]]
+        p += sizes[i + 1]
+        mats.append((W, b))
+    L = w[p:].reshape(sizes[-1], sizes[0]) if model._bypass() else None
+    return mats, L
+
+
+def _twin_network(model, w, z):
+    """Output and d out / d (w, z) of the network, by explicit matrices."""
+    mats, L = _unpack(model, w)
+    f = (lambda s: 1 / (1 + np.exp(-s))) if model.activation == "logistic" else np.tanh
+    df = (
+        (lambda a: a * (1 - a))
+        if model.activation == "logistic"
+        else (lambda a: 1 - a * a)
+    )
+    acts = [z]
+    for W, b in mats[:-1]:
+        acts.append(f(W @ acts[-1] + b))
+    W, b = mats[-1]
+    out = W @ acts[-1] + b + (L @ z if L is not None else 0.0)
+    n_out, n_w = len(out), len(w)
+    jw = np.zeros((n_out, n_w))
+    jz = np.zeros((n_out, len(z)))
+    for j in range(n_out):
+        delta = np.eye(n_out)[j]
+        grads, p_end = [], sum(W.size + b.size for W, b in mats)
+        for layer in range(len(mats) - 1, -1, -1):
+            W, b = mats[layer]
+            grads.append((np.outer(delta, acts[layer]).ravel(), delta.copy()))
+            back = W.T @ delta
+            delta = back * df(acts[layer]) if layer > 0 else back
+        flat = np.concatenate([np.concatenate(g) for g in reversed(grads)])
+        jw[j, :p_end] = flat
+        jz[j] = delta
+        if L is not None:
+            jw[j, p_end:] = np.outer(np.eye(n_out)[j], z).ravel()
+            jz[j] += L[j]
+    return out, jw, jz
+
+
+def _twin_run(model, w, data, seg_len):
+    """Recurrence with forward sensitivities, one sample at a time."""
+    na, nb, nk = model.output_lags, model.input_lags, model.input_delay
+    Y, U, h = data.Y, data.U, data.h
+    n_out = Y.shape[1]
+    Yhat = Y.copy()
+    sens = np.zeros((len(Y), n_out, len(w)))
+    for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
+        for t in range(a + h, b):
+            seg_start = a + h + ((t - a - h) // seg_len) * seg_len
+            lags = [
+                Yhat[t - i] if t - i >= seg_start else Y[t - i]
+                for i in range(1, na + 1)
+            ]
+            phi = np.concatenate([*lags, *[U[t - nk - i] for i in range(nb)]])
+            out, jw, jz = _twin_network(model, w, model._S @ phi)
+            jphi = jz @ model._S
+            total = jw.copy()
+            for i in range(1, na + 1):
+                if t - i >= seg_start:
+                    total += jphi[:, (i - 1) * n_out : i * n_out] @ sens[t - i]
+            Yhat[t], sens[t] = out, total
+    rows = data.modelled
+    return Yhat, sens[rows].reshape(-1, len(w))
+
+
+def _fitted(n_outputs=1, **params):
+    rng = np.random.default_rng(3)
+    Xs = [rng.standard_normal((60, 2)) for _ in range(3)]
+    ys = [rng.standard_normal((60, n_outputs)) * 0.1 for _ in range(3)]
+    defaults = dict(
+        output_lags=3,
+        input_lags=2,
+        hidden_layer_sizes=(4, 3),
+        n_init=1,
+        max_iter=3,
+        early_stopping=False,
+        random_state=0,
+    )
+    defaults.update(params)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model = TDLRegressor(**defaults).fit(Xs, ys)
+    # Perturb the weights so that the sensitivities are not trivially zero.
+    model.coefs_ = model.coefs_ + 0.3 * np.random.default_rng(1).standard_normal(
+        model.coefs_.shape
+    )
+    return model, model._stack(Xs, ys)
+
+
+KERNEL_CASES = [
+    dict(activation="tanh"),
+    dict(activation="logistic", lag_representation="delays"),
+    dict(activation="tanh", linear_bypass=False, input_delay=0),
+    dict(n_outputs=2, activation="logistic"),
+    dict(n_outputs=2, output_lags=1, input_lags=3, input_delay=2),
+    dict(hidden_layer_sizes=()),
+]
+
+
+@pytest.mark.parametrize("case", KERNEL_CASES)
+@pytest.mark.parametrize("seg_len", [1, 7, _FREE_RUN])
+def test_jacobian_matches_twin_and_finite_differences(case, seg_len):
+    model, data = _fitted(**case)
+    w = model.coefs_
+    Yhat, J, diverged, _ = model._run(w, data, seg_len, True)
+    assert (diverged < 0).all()
+    Yt, Jt = _twin_run(model, w, data, seg_len)
+    np.testing.assert_allclose(Yhat, Yt, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(J, Jt, rtol=1e-10, atol=1e-12)
+
+    rows = data.modelled
+    eps = 1e-6
+    Jfd = np.empty_like(J)
+    for i in range(len(w)):
+        d = np.zeros_like(w)
+        d[i] = eps
+        up = model._run(w + d, data, seg_len, False)[0][rows].ravel()
+        down = model._run(w - d, data, seg_len, False)[0][rows].ravel()
+        Jfd[:, i] = (up - down) / (2 * eps)
+    err = np.linalg.norm(J - Jfd) / np.linalg.norm(J)
+    assert err < 1e-7
+
+
+@pytest.mark.parametrize("case", KERNEL_CASES)
+@pytest.mark.parametrize("seg_len", [1, 7, _FREE_RUN])
+def test_adjoint_gradient_equals_jacobian_transpose(case, seg_len):
+    model, data = _fitted(**case)
+    w = model.coefs_
+    Yhat, J, _, state = model._run(w, data, seg_len, True)
+    rows = data.modelled
+    r = (Yhat[rows] - data.Y[rows]).ravel()
+    grad = model._gradient(w, data, seg_len, state)
+    np.testing.assert_allclose(grad, J.T @ r, rtol=1e-9, atol=1e-11)
+
+
+def test_horizon_predictor_is_sliding():
+    model, data = _fitted()
+    w = model.coefs_
+    one = model._run_horizon(w, data, 1)
+    np.testing.assert_allclose(one, model._run(w, data, 1, False)[0])
+    # horizon k at row t equals a free run started from measurements at t-k.
+    k = 5
+    pred = model._run_horizon(w, data, k)
+    a, h = data.starts[1], data.h
+    t = a + h + 20
+    sub_starts = np.array([0, h + k])
+    from sysid_nn._base import _Data
+
+    sub = _Data(
+        Y=data.Y[t - k + 1 - h : t + 1].copy(),
+        U=data.U[t - k + 1 - h : t + 1].copy(),
+        starts=sub_starts,
+        h=h,
+    )
+    free = model._run(w, sub, _FREE_RUN, False)[0]
+    assert free[-1, 0] == pytest.approx(pred[t, 0], rel=1e-12)
+    # A longer horizon cannot see more than the free run beyond it.
+    full = model._run_horizon(w, data, 10_000)
+    np.testing.assert_allclose(full, model._run(w, data, _FREE_RUN, False)[0])
+
+
+# ---------------------------------------------------------------------------
+# identification
+# ---------------------------------------------------------------------------
+def test_linear_model_recovers_arx_coefficients():
+    rng = np.random.default_rng(0)
+    b, a = [0.0, 0.5, 0.2], [1.0, -1.5, 0.7]
+    Xs = [rng.standard_normal((400, 1)) for _ in range(3)]
+    ys = [lfilter(b, a, X[:, 0]) for X in Xs]
+    model = TDLRegressor(
+        output_lags=2,
+        input_lags=2,
+        hidden_layer_sizes=(),
+        lag_representation="delays",
+        focus="prediction",
+        n_init=1,
+        random_state=0,
+    ).fit(Xs, ys)
+    # Fold the scaling back to obtain y(t) = a1 y(t-1) + a2 y(t-2) + b1 u(t-1) + ...
+    sy, sx = model._y_scale[0], model._x_scale[0]
+    W = model.coefs_[:4] @ model._S
+    coef = np.array([W[0], W[1], W[2] * sy / sx, W[3] * sy / sx])
+    np.testing.assert_allclose(coef, [1.5, -0.7, 0.5, 0.2], atol=1e-6)
+
+
+def test_nonlinear_narx_reaches_near_zero_free_run_error_on_new_data():
+    rng = np.random.default_rng(1)
+    Xs = [rng.standard_normal((500, 1)) for _ in range(5)]
+    ys = [_narx(X) for X in Xs]
+    net = TDLRegressor(
+        output_lags=2,
+        input_lags=2,
+        hidden_layer_sizes=(8,),
+        n_init=2,
+        random_state=0,
+        max_iter=100,
+    ).fit(Xs[:3], ys[:3], X_val=Xs[3:4], y_val=ys[3:4])
+    lin = TDLRegressor(
+        output_lags=2, input_lags=2, hidden_layer_sizes=(), n_init=1
+    ).fit(Xs[:3], ys[:3])
+    e_net = net.simulate(Xs[4]) - ys[4]
+    e_lin = lin.simulate(Xs[4]) - ys[4]
+    nrmse_net = np.sqrt(np.mean(e_net**2)) / ys[4].std()
+    nrmse_lin = np.sqrt(np.mean(e_lin**2)) / ys[4].std()
+    assert nrmse_net < 0.05
+    assert nrmse_net < 0.2 * nrmse_lin
+
+
+@pytest.mark.slow
+def test_paper_setting_one_step_prediction_at_least_linear():
+    """Paper section 4.2: the TDL trained on every third sample (dt = 0.03).
+
+    The paper's structure (6/5 lags, 9 logistic nodes), started at the ARX
+    fit through the linear bypass, predicts unseen records one step ahead at
+    least as well as the linear model.
+    """
+    from sysid_nn import HystereticOscillator
+
+    rec = HystereticOscillator().generate(6, random_state=11)
+    X = [f[::3, None] for f in rec.excitation]
+    y = [d[::3] for d in rec.displacement]
+    paper = TDLRegressor(
+        output_lags=6,
+        input_lags=5,
+        hidden_layer_sizes=(9,),
+        activation="logistic",
+        lag_representation="delays",
+        focus="prediction",
+        n_init=2,
+        max_iter=200,
+        random_state=0,
+    )
+    linear = TDLRegressor(
+        output_lags=6, input_lags=5, hidden_layer_sizes=(), focus="prediction"
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        paper.fit(X[:2], y[:2], X_val=X[2:3], y_val=y[2:3])
+        linear.fit(X[:2], y[:2])
+
+    def one_step(model):
+        pred = model.predict(X[3:], y[3:], horizon=1)
+        return np.sqrt(
+            np.mean(
+                np.concatenate([(p - t) ** 2 for p, t in zip(pred, y[3:], strict=True)])
+            )
+        )
+
+    assert one_step(paper) <= one_step(linear)
+
+
+# ---------------------------------------------------------------------------
+# API behaviour
+# ---------------------------------------------------------------------------
+def _records(n=4, length=200, seed=0):
+    rng = np.random.default_rng(seed)
+    Xs = [rng.standard_normal((length, 1)) for _ in range(n)]
+    return Xs, [_narx(X) for X in Xs]
+
+
+def _small(**params):
+    defaults = dict(
+        output_lags=2,
+        input_lags=2,
+        hidden_layer_sizes=(3,),
+        n_init=1,
+        max_iter=10,
+        random_state=0,
+    )
+    defaults.update(params)
+    return TDLRegressor(**defaults)
+
+
+@pytest.fixture(autouse=True)
+def _quiet_convergence():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        yield
+
+
+def test_outputs_mirror_inputs():
+    Xs, ys = _records()
+    model = _small().fit(Xs, ys)
+    sims = model.simulate(Xs)
+    assert isinstance(sims, list) and [s.shape for s in sims] == [y.shape for y in ys]
+    one = model.predict(Xs[0], ys[0])
+    assert isinstance(one, np.ndarray) and one.shape == ys[0].shape
+    y2 = [y[:, None] for y in ys]
+    model2 = _small().fit(Xs, y2)
+    assert model2.predict(Xs[0]).shape == (200, 1)
+    assert model.predict(Xs[0]).shape == (200,)
+    np.testing.assert_array_equal(model.predict(Xs[1]), model.simulate(Xs[1]))
+
+
+def test_multi_input_multi_output():
+    rng = np.random.default_rng(4)
+    X = rng.standard_normal((300, 2))
+    y = np.column_stack(
+        [lfilter([0, 0.4], [1, -0.5], X[:, 0]), lfilter([0, 0.3], [1, -0.2], X[:, 1])]
+    )
+    model = _small(hidden_layer_sizes=(), max_iter=50).fit(X, y)
+    assert model.n_outputs_ == 2 and model.n_features_in_ == 2
+    assert model.simulate(X).shape == (300, 2)
+    assert model.score(X, y) > 0.999
+
+
+def test_measured_initial_outputs_change_the_start_only():
+    Xs, ys = _records()
+    model = _small().fit(Xs, ys)
+    zero = model.simulate(Xs[0])
+    init = model.simulate(Xs[0], initial_outputs=[0.5, 0.4])
+    assert init[0] != zero[0]
+    with pytest.raises(ValueError, match="initial_outputs"):
+        model.simulate(Xs[0], initial_outputs=[1.0, 2.0, 3.0])
+
+
+def test_pandas_inputs_and_feature_names():
+    Xs, ys = _records()
+    frame = pd.DataFrame(Xs[0], columns=["force"])
+    model = _small().fit(frame, pd.Series(ys[0]))
+    assert list(model.feature_names_in_) == ["force"]
+    np.testing.assert_allclose(model.predict(frame), model.predict(Xs[0]))
+
+
+def test_clone_params_pickle_joblib(tmp_path):
+    Xs, ys = _records()
+    model = _small().fit(Xs, ys)
+    twin = clone(model)
+    assert twin.get_params() == model.get_params()
+    twin.set_params(hidden_layer_sizes=(5,))
+    assert twin.hidden_layer_sizes == (5,)
+    restored = pickle.loads(pickle.dumps(model))
+    np.testing.assert_array_equal(restored.simulate(Xs[2]), model.simulate(Xs[2]))
+    joblib.dump(model, tmp_path / "m.joblib")
+    again = joblib.load(tmp_path / "m.joblib")
+    np.testing.assert_array_equal(
+        again.predict(Xs[2], ys[2], horizon=3), model.predict(Xs[2], ys[2], horizon=3)
+    )
+
+
+def test_same_random_state_same_model_and_restarts_in_parallel():
+    Xs, ys = _records()
+    a = _small(n_init=2, random_state=5).fit(Xs, ys)
+    b = _small(n_init=2, random_state=5, n_jobs=2).fit(Xs, ys)
+    np.testing.assert_array_equal(a.coefs_, b.coefs_)
+    assert a.restart_scores_.shape == (2,)
+
+
+def test_grid_search_over_hidden_nodes_by_experiment():
+    Xs, ys = _records(n=6, length=150)
+    search = GridSearchCV(
+        _small(max_iter=5), {"hidden_layer_sizes": [(), (2,), (4,)]}, cv=KFold(3)
+    ).fit(Xs, ys)
+    assert search.best_params_["hidden_layer_sizes"] in [(), (2,), (4,)]
+    assert np.all(np.isfinite(search.cv_results_["mean_test_score"]))
+
+
+def test_pipeline_with_row_wise_scaler():
+    Xs, ys = _records()
+    pipe = make_pipeline(FunctionTransformer(lambda X: 2.0 * X), _small())
+    pipe.fit(Xs[0], ys[0])
+    assert pipe.predict(Xs[1]).shape == ys[1].shape
+
+
+def test_solvers_and_focus_all_train():
+    Xs, ys = _records()
+    for solver in ["lm", "lbfgs", "slsqp"]:
+        for focus in ["prediction", "simulation"]:
+            model = _small(solver=solver, focus=focus, max_iter=20).fit(Xs[:3], ys[:3])
+            assert np.isfinite(model.loss_)
+            assert model.score(Xs[3], ys[3]) > 0.5
+
+
+def test_convergence_warning_when_stopped_short():
+    Xs, ys = _records()
+    with pytest.warns(ConvergenceWarning, match="max_iter"):
+        _small(max_iter=1, early_stopping=False).fit(Xs, ys)
+
+
+def test_divergent_free_run_returns_nan_and_warns():
+    Xs, ys = _records()
+    model = _small(hidden_layer_sizes=()).fit(Xs, ys)
+    # Make the output feedback explosive.
+    model.coefs_[0] = 5.0 / model._S[0, 0]
+    with pytest.warns(DivergenceWarning, match="diverged at sample"):
+        sim = model.simulate(Xs[0])
+    first = np.flatnonzero(np.isnan(sim))[0]
+    assert np.all(np.isnan(sim[first:])) and np.all(np.isfinite(sim[:first]))
+    assert model.score(Xs[0], ys[0]) == -np.inf
+
+
+def test_early_stopping_uses_held_out_data():
+    Xs, ys = _records()
+    model = _small(max_iter=20).fit(Xs, ys)
+    assert model.best_validation_score_ is not None
+    model = _small(max_iter=20, early_stopping=False).fit(Xs, ys)
+    assert model.best_validation_score_ is None
+
+
+# ---------------------------------------------------------------------------
+# bad input
+# ---------------------------------------------------------------------------
+def test_bad_input_messages():
+    Xs, ys = _records()
+    model = _small()
+    with pytest.raises(NotFittedError):
+        model.predict(Xs[0])
+    with pytest.raises(ValueError, match="Reshape your data"):
+        model.fit(Xs[0][:, 0], ys[0])
+    bad = Xs[1].copy()
+    bad[17, 0] = np.nan
+    with pytest.raises(ValueError, match=r"X\[1\] contains NaN \(first at sample 17\)"):
+        model.fit([Xs[0], bad], ys[:2])
+    with pytest.raises(ValueError, match="inf"):
+        model.fit(Xs[0], np.where(np.arange(200) == 3, np.inf, ys[0]))
+    with pytest.raises(ValueError, match="sequence 1 of X has 2 samples"):
+        model.fit([Xs[0], Xs[1][:2]], [ys[0], ys[1][:2]])
+    with pytest.raises(ValueError, match="same number of samples in sequence 0"):
+        model.fit([Xs[0]], [ys[0][:-1]])
+    with pytest.raises(ValueError, match="both be lists"):
+        model.fit(Xs, ys[0])
+    fitted = _small().fit(Xs, ys)
+    with pytest.raises(
+        ValueError, match="X has 2 features, but TDLRegressor is expecting 1"
+    ):
+        fitted.predict(np.ones((50, 2)))
+    with pytest.raises(ValueError, match="horizon must be a positive integer"):
+        fitted.predict(Xs[0], ys[0], horizon=0)
+    with pytest.raises(ValueError, match="hidden_layer_sizes"):
+        _small(hidden_layer_sizes=(3, 0)).fit(Xs, ys)
+    with pytest.raises(ValueError, match="X_val and y_val must be given together"):
+        _small().fit(Xs, ys, X_val=Xs)
+
+
+@parametrize_with_checks(
+    [
+        TDLRegressor(
+            output_lags=2, input_lags=2, hidden_layer_sizes=(3,), n_init=1, max_iter=5
+        )
+    ],
+    expected_failed_checks=lambda est: ROW_ORDER_CHECKS,
+)
+def test_sklearn_compatible(estimator, check):
+    check(estimator)
