@@ -268,7 +268,7 @@ _METRICS: dict[str, tuple[Callable[..., Any], float]] = {
 # ----------------------------------------------------------------------------
 # Error statistics of the paper (eq. 19-20)
 # ----------------------------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ErrorStatistics:
     """Averaged mean and standard deviation of errors over realisations.
 

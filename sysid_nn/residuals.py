@@ -167,7 +167,7 @@ def _chi2_statistic(
     return float(n * rho @ solution)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CorrelationTest:
     """One correlation function with its confidence band and chi-square test.
 
@@ -279,7 +279,7 @@ def _correlation_test(
 # ----------------------------------------------------------------------------
 # Whiteness
 # ----------------------------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class WhitenessResult:
     """Autocorrelation of the residuals and the chi-square whiteness test.
 
@@ -442,7 +442,7 @@ def whiteness_test(
 # ----------------------------------------------------------------------------
 # Cross-correlation with the input
 # ----------------------------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CrossCorrelationResult:
     """Residual/input cross-correlation and the two chi-square tests.
 
@@ -634,10 +634,10 @@ def cross_correlation_test(
 # ----------------------------------------------------------------------------
 # Higher-order correlation tests for non-linear models
 # ----------------------------------------------------------------------------
-NONLINEAR_TESTS = ("phi_ee", "phi_ue", "phi_u2e", "phi_u2e2", "phi_eeu")
+_NONLINEAR_TESTS = ("phi_ee", "phi_ue", "phi_u2e", "phi_u2e2", "phi_eeu")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class NonlinearTestResult:
     """Billings-Voon higher-order correlation tests.
 
@@ -690,7 +690,7 @@ class NonlinearTestResult:
             if t.name == name and (name == "phi_ee" or t.input == (input or 0)):
                 return t
         raise KeyError(
-            f"no test {name!r} for input {input!r}; names: {NONLINEAR_TESTS}"
+            f"no test {name!r} for input {input!r}; names: {_NONLINEAR_TESTS}"
         )
 
     @property
@@ -821,7 +821,7 @@ def nonlinear_correlation_tests(
 Key = tuple[int | str, int]  # (sequence index or "pooled", output column)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ResidualAnalysis:
     """All residual tests of a model on data; see :func:`analyze_residuals`.
 
