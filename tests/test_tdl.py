@@ -298,11 +298,8 @@ def test_paper_setting_one_step_prediction_at_least_linear():
 
     def one_step(model):
         pred = model.predict(X[3:], y[3:], horizon=1)
-        return np.sqrt(
-            np.mean(
-                np.concatenate([(p - t) ** 2 for p, t in zip(pred, y[3:], strict=True)])
-            )
-        )
+        errors = [p - t for p, t in zip(pred, y[3:], strict=True)]
+        return np.sqrt(np.mean(np.concatenate(errors) ** 2))
 
     assert one_step(paper) <= one_step(linear)
 
