@@ -1069,6 +1069,12 @@ def analyze_residuals(
             f"{type(X).__name__} and {type(y).__name__}."
         )
     _check_paired(X_seqs, y_seqs, "X", "y")
+    shortest = min(v.shape[0] for v in y_seqs)
+    if skip >= shortest:
+        raise ValueError(
+            f"skip={skip} leaves no samples of the shortest sequence ({shortest} "
+            "samples); use a skip well below the sequence length."
+        )
     if mode == "prediction":
         model = estimator.predict(X, y, horizon=horizon)
     else:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pickle
 import warnings
 
 import numpy as np
@@ -276,6 +277,14 @@ def test_divergent_candidate_scores_last_without_crashing():
     search = GridSearchCV(FilterModel(), grid, scoring=penalised, cv=KFold(3)).fit(X, y)
     assert search.cv_results_["mean_test_score"][0] == -1e6
     assert search.best_params_ == {"model": "oracle"}
+
+
+def test_scorers_pickle_for_parallel_search():
+    X, y = make_sequences(2)
+    oracle = FilterModel("oracle").fit(X, y)
+    scorer = make_prediction_scorer(horizon=3, metric="r2")
+    clone = pickle.loads(pickle.dumps(scorer))
+    assert clone(oracle, X, y) == scorer(oracle, X, y)
 
 
 def test_scorer_bad_arguments():

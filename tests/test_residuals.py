@@ -456,6 +456,8 @@ def test_analyze_residuals_bad_arguments():
         analyze_residuals(FirstOrderARX(), X, y, mode="free")
     with pytest.raises(ValueError, match="skip"):
         analyze_residuals(FirstOrderARX(), X, y, skip=-1)
+    with pytest.raises(ValueError, match="skip=200 leaves no samples"):
+        analyze_residuals(FirstOrderARX(), X, y, skip=200)
     with pytest.raises(ValueError, match="X has 200 samples but y has 150"):
         analyze_residuals(FirstOrderARX(), X, y[:150])
     with pytest.raises(ValueError, match="both be arrays or both be lists"):
