@@ -1,9 +1,10 @@
 """Small input-checking helpers shared by the public modules.
 
-Every helper raises :class:`ValueError` (or :class:`TypeError` for a wrong
-type) with a message that names the argument, says what was wrong and how to
-fix it. Random states are converted with
-:func:`sklearn.utils.check_random_state`; nothing here duplicates it.
+Every helper raises :class:`ValueError` (for a wrong type,
+:class:`InvalidArgumentError`, which is also a :class:`TypeError`) with a
+message that names the argument, says what was wrong and how to fix it.
+Random states are converted with :func:`sklearn.utils.check_random_state`;
+nothing here duplicates it.
 """
 
 from __future__ import annotations
@@ -14,12 +15,21 @@ from collections.abc import Sequence
 import numpy as np
 
 __all__ = [
+    "InvalidArgumentError",
     "check_finite_array",
     "check_in_range",
     "check_positive",
     "check_positive_int",
     "check_real",
 ]
+
+
+class InvalidArgumentError(ValueError, TypeError):
+    """An argument of the wrong type; both a ValueError and a TypeError.
+
+    Callers that catch ``ValueError`` for bad input (as scikit-learn users
+    do) also catch a wrong type, and ``TypeError`` handlers keep working.
+    """
 
 
 def check_real(x: object, name: str) -> float:
@@ -43,7 +53,7 @@ def check_real(x: object, name: str) -> float:
     2.0
     """
     if isinstance(x, bool) or not isinstance(x, numbers.Real):
-        raise TypeError(
+        raise InvalidArgumentError(
             f"{name} must be a real number, got {x!r} of type {type(x).__name__}."
         )
     value = float(x)
@@ -150,7 +160,7 @@ def check_positive_int(x: object, name: str) -> int:
     25
     """
     if isinstance(x, bool) or not isinstance(x, numbers.Integral):
-        raise TypeError(
+        raise InvalidArgumentError(
             f"{name} must be an integer >= 1, got {x!r} of type {type(x).__name__}."
         )
     if x < 1:

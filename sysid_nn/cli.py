@@ -32,6 +32,20 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _seed(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer >= 0, got {text!r}"
+        ) from None
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer in [0, 2**32), got {text!r}"
+        )
+    return value
+
+
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
@@ -68,7 +82,7 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--n-realizations", type=_positive_int, default=25, metavar="N")
     p.add_argument("--n-samples", type=_positive_int, default=2000, metavar="N")
     p.add_argument("--dt", type=_positive_float, default=0.01, help="sample spacing, s")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    p.add_argument("--seed", type=_seed, default=0, help="random seed (default: 0)")
     p.add_argument(
         "--r0",
         type=_positive_float,

@@ -48,6 +48,7 @@ def test_generate_parquet_and_default_calibration(tmp_path, capsys):
         (["--dt", "abc"], "--dt"),
         (["--r0", "-1"], "--r0"),
         (["--seed", "x"], "--seed"),
+        (["--seed", "-1"], "--seed"),
     ],
 )
 def test_bad_arguments_exit_2(tmp_path, capsys, args, fragment):

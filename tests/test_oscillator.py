@@ -363,3 +363,8 @@ def test_bad_simulate_and_generate_arguments():
         osc.generate(2, dt=-0.01)
     with pytest.raises(ValueError, match="target"):
         osc.calibrate_r0(target=0.0)
+    # A wrong type is reported the same way (also a TypeError).
+    with pytest.raises(ValueError, match="n_realizations must be an integer"):
+        osc.generate(2.5)
+    with pytest.raises(TypeError, match="dt must be a real number"):
+        osc.simulate(np.zeros(10), "0.01")
