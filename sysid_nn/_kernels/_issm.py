@@ -1,0 +1,227 @@
+"""Innovation state-space recurrence (paper eq. 7-12) with exact sensitivities.
+
+Data layout as in the TDL kernels: sequences are stacked in ``Y``
+(``(n_rows, p)``, standardised measured outputs) and ``U`` (``(n_rows,
+n_inputs)``); sequence ``s`` occupies rows ``starts[s]:starts[s + 1]``, the
+first ``h`` of them history. The state ``x`` has ``n`` components, the first
+``p`` of which are the measured outputs (``H = [I 0]``). At modelled row
+``t`` the network sees
+
+``z = [x(t-1), u(t-nk), e(t-1)]``  (lengths ``n``, ``n_inputs``, ``p``)
+
+and returns ``x(t)``; ``yhat(t) = x(t)[:p]``. Before the first modelled row
+the state is ``X0[s]``. Three modes, chosen by ``seg_len``:
+
+* ``seg_len == 1``: the one-step predictor, innovations
+  ``e(t-1) = y(t-1) - x(t-1)[:p]`` fed back (eq. 10 with ``Phi - K H``);
+* ``seg_len > 1``: simulation (``e = 0``) in segments of ``seg_len`` rows; at
+  each later segment start the measured states are reset to the measured
+  outputs while the unmeasured ones carry over (multiple shooting);
+* ``seg_len`` beyond the sequence: the free run from ``X0``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp
+from sysid_nn._kernels._tdl import _out_of_range
+
+
+@njit(cache=True, inline="always")
+def _network_input(x, U, t, nk, e, z):
+    n = x.shape[0]
+    m = U.shape[1]
+    for i in range(n):
+        z[i] = x[i]
+    for k in range(m):
+        z[n + k] = U[t - nk, k]
+    for k in range(e.shape[0]):
+        z[n + m + k] = e[k]
+
+
+@njit(cache=True)
+def issm_run(
+    w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound, want_jac,
+    want_lin, Xs, J, Z, A, D, diverged,
+):  # fmt: skip
+    """Run the state recurrence; optionally the Jacobian and linearisation.
+
+    ``Xs`` (``(n_rows, n)``) receives the states (history rows hold ``X0``;
+    NaN from a divergence on). With ``want_jac``, ``J`` (``(n_modelled * p,
+    n_w)``) receives ``d yhat / d w = H Psi`` by the forward sensitivities of
+    eq. 10. With ``want_lin``, ``D[t]`` (``(n, n_z)``) receives ``d x(t) /
+    d z``, whose blocks are ``Phi(t)`` and ``K(t)`` of eq. 12. ``Z`` and
+    ``A`` keep the network inputs and hidden activations for the adjoint
+    pass. ``diverged[s]`` is the first modelled index of sequence ``s`` whose
+    state left ``[-bound, bound]``, or -1.
+    """
+    n = Xs.shape[1]
+    p = Y.shape[1]
+    m = U.shape[1]
+    n_z = sizes[0]
+    n_w = w.shape[0]
+    width = np.max(sizes)
+    predictor = seg_len == 1
+    sens = want_jac or want_lin
+    x = np.empty(n)
+    e = np.zeros(p)
+    out = np.empty(n)
+    v = np.zeros(n)
+    gz = np.empty(n_z)
+    coef = np.empty(n)
+    d1 = np.empty(width)
+    d2 = np.empty(width)
+    lam = np.empty(n_w)  # scratch for d x / d w when only D is wanted
+    psi = np.zeros((n, n_w if want_jac else 0))
+    psi_prev = np.zeros((n, n_w if want_jac else 0))
+    row_base = 0
+    for s in range(starts.shape[0] - 1):
+        a = starts[s]
+        b = starts[s + 1]
+        diverged[s] = -1
+        for t in range(a, a + h):
+            for i in range(n):
+                Xs[t, i] = X0[s, i]
+        for i in range(n):
+            x[i] = X0[s, i]
+        if want_jac:
+            psi_prev[:, :] = 0.0
+        for t in range(a + h, b):
+            k_local = t - a - h
+            restart = (not predictor) and k_local > 0 and k_local % seg_len == 0
+            if restart:
+                # Multiple shooting: measured states restart from the data;
+                # their sensitivities vanish, the unmeasured ones carry over.
+                for k in range(p):
+                    x[k] = Y[t - 1, k]
+                if want_jac:
+                    psi_prev[:p, :] = 0.0
+            if predictor:
+                for k in range(p):
+                    e[k] = Y[t - 1, k] - x[k]
+            _network_input(x, U, t, nk, e, Z[t])
+            mlp_forward(w, sizes, act, bypass, Z[t], A[t], out)
+            if _out_of_range(out, bound):
+                diverged[s] = k_local
+                for tt in range(t, b):
+                    for i in range(n):
+                        Xs[tt, i] = np.nan
+                break
+            for i in range(n):
+                x[i] = out[i]
+                Xs[t, i] = out[i]
+            if not sens:
+                continue
+            for j in range(n):
+                v[:] = 0.0
+                v[j] = 1.0
+                if want_jac:
+                    psi[j, :] = 0.0
+                    mlp_vjp(w, sizes, act, bypass, Z[t], A[t], v, psi[j], gz, d1, d2)
+                else:
+                    mlp_vjp(w, sizes, act, bypass, Z[t], A[t], v, lam, gz, d1, d2)
+                if want_lin:
+                    for c in range(n_z):
+                        D[t, j, c] = gz[c]
+                if not want_jac:
+                    continue
+                # Eq. 10: Psi(t) = Lambda(t) + [Phi(t) - K(t) H] Psi(t-1).
+                for i in range(n):
+                    coef[i] = gz[i]
+                if predictor:
+                    for k in range(p):
+                        coef[k] -= gz[n + m + k]
+                for i in range(n):
+                    c_i = coef[i]
+                    if c_i != 0.0:
+                        for c in range(n_w):
+                            psi[j, c] += c_i * psi_prev[i, c]
+            if want_jac:
+                r0 = row_base + k_local * p
+                for k in range(p):
+                    for c in range(n_w):
+                        J[r0 + k, c] = psi[k, c]
+                psi, psi_prev = psi_prev, psi
+        row_base += (b - a - h) * p
+
+
+@njit(cache=True)
+def issm_gradient(w, sizes, act, bypass, Y, U, starts, h, seg_len, Xs, Z, A, grad):
+    """Adjoint (backpropagation-through-time) gradient of ``0.5 ||H x - Y||^2``.
+
+    Needs ``Xs``, ``Z`` and ``A`` of a completed :func:`issm_run` in the same
+    mode without divergence; adds the gradient to ``grad``.
+    """
+    n = Xs.shape[1]
+    p = Y.shape[1]
+    m = U.shape[1]
+    n_z = sizes[0]
+    width = np.max(sizes)
+    predictor = seg_len == 1
+    gz = np.empty(n_z)
+    d1 = np.empty(width)
+    d2 = np.empty(width)
+    adj = np.zeros((Xs.shape[0], n))
+    for s in range(starts.shape[0] - 1):
+        a = starts[s]
+        b = starts[s + 1]
+        for t in range(b - 1, a + h - 1, -1):
+            for k in range(p):
+                adj[t, k] += Xs[t, k] - Y[t, k]
+            mlp_vjp(w, sizes, act, bypass, Z[t], A[t], adj[t], grad, gz, d1, d2)
+            k_local = t - a - h
+            if k_local == 0:
+                continue  # the initial state does not depend on w
+            first = p if (not predictor and k_local % seg_len == 0) else 0
+            for i in range(first, n):
+                adj[t - 1, i] += gz[i]
+            if predictor:
+                for k in range(p):
+                    adj[t - 1, k] -= gz[n + m + k]
+
+
+@njit(cache=True)
+def issm_predict_horizon(
+    w, sizes, act, bypass, U, starts, h, nk, horizon, X0, Xp, Yhat
+):
+    """Sliding ``horizon``-step-ahead predictor from one-step predictor states.
+
+    ``Xp`` holds the states of the one-step predictor (innovations fed back);
+    ``Xp[t]`` uses measurements up to ``t - 1``. Each modelled ``Yhat[t]``
+    continues from ``Xp[t - horizon + 1]`` with ``e = 0`` (from ``X0`` at the
+    sequence start when that row lies before it), so no value sees a
+    measurement later than ``t - horizon``.
+    """
+    n = Xp.shape[1]
+    p = Yhat.shape[1]
+    n_z = sizes[0]
+    z = np.empty(n_z)
+    acts = np.empty(max(1, np.sum(sizes[1:-1])))
+    out = np.empty(n)
+    x = np.empty(n)
+    e = np.zeros(p)
+    for s in range(starts.shape[0] - 1):
+        a = starts[s]
+        b = starts[s + 1]
+        for t in range(a, a + h):
+            for k in range(p):
+                Yhat[t, k] = X0[s, k]
+        for t in range(a + h, b):
+            first = t - horizon + 1
+            if first >= a + h:
+                for i in range(n):
+                    x[i] = Xp[first, i]
+                first += 1
+            else:
+                for i in range(n):
+                    x[i] = X0[s, i]
+                first = a + h
+            for tt in range(first, t + 1):
+                _network_input(x, U, tt, nk, e, z)
+                mlp_forward(w, sizes, act, bypass, z, acts, out)
+                for i in range(n):
+                    x[i] = out[i]
+            for k in range(p):
+                Yhat[t, k] = x[k]
