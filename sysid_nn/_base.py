@@ -23,6 +23,7 @@ from sklearn.base import BaseEstimator
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
+from threadpoolctl import threadpool_limits
 from sklearn.utils.validation import check_is_fitted
 
 __all__ = ["DivergenceWarning"]
@@ -451,6 +452,12 @@ class _RecurrentRegressorBase(BaseEstimator):
 
     def _fit_one(self, train: _Data, val: _Data | None, seed: int, k: int):
         """One restart through the whole schedule; returns a :class:`_Run`."""
+        # The linear algebra here is small (tens to hundreds of weights):
+        # threaded BLAS only spins, and restarts already run in parallel.
+        with threadpool_limits(limits=1, user_api="blas"):
+            return self._fit_one_serial(train, val, seed, k)
+
+    def _fit_one_serial(self, train, val, seed, k):
         rng = np.random.RandomState(seed)
         w = self._initial_params(rng)
         mask = self._penalty_mask()
