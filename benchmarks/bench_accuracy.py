@@ -1,0 +1,441 @@
+"""Accuracy of the identified models on unseen realisations (paper section 4).
+
+Trains the estimators on realisations of the hysteretic oscillator under the
+protocols of ``_protocol.py`` (P1: one training record of typical amplitude,
+P5: five; two validation records; the same 25 unseen test records) at
+dt = 0.01 s and dt = 0.03 s, and scores on the test records:
+
+* free-run NRMSE from zero initial conditions (``simulate(X)``): mean,
+  median, worst; the number of divergent runs (NaN output);
+* free-run NRMSE started at t = 2 s (sample 200 at dt = 0.01) from the
+  measured outputs (TDL: ``initial_outputs``; ISSM: ``initial_state`` with the
+  measured outputs as the first p states, zeros elsewhere), scored from there;
+* free-run NRMSE of the oscillatory part: both signals zero-phase high-passed
+  above 0.3 Hz (4th-order Butterworth, ``filtfilt``);
+* k-step prediction NRMSE, k = 1, 10, 50 (``predict(X, y, horizon=k)``);
+* pass rates of the whiteness and cross-correlation tests of the one-step
+  residuals (max lag 25, 5 % level);
+* fit time.
+
+NRMSE = RMS error / standard deviation of the measured signal, per record;
+for the ISSM with displacement and velocity measured the displacement column
+is scored. Writes ``results.md`` and ``results_accuracy.csv`` next to this
+file (``--quick`` writes to the temporary directory instead).
+
+Usage::
+
+    python benchmarks/bench_accuracy.py                 # full run
+    python benchmarks/bench_accuracy.py --quick         # smoke test, ~1 min
+    python benchmarks/bench_accuracy.py --protocols P1 --dt 0.01 --models tdl,linear
+    python benchmarks/run.py accuracy
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import os
+import platform
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import _protocol as P  # noqa: E402
+
+from sysid_nn import TDLRegressor  # noqa: E402
+
+try:  # the ISSM may not exist yet in this tree
+    from sysid_nn import ISSMRegressor  # noqa: E402
+except (ImportError, AttributeError):  # pragma: no cover
+    ISSMRegressor = None
+
+DEFAULT_SEED = 2024
+ROBUSTNESS_SEEDS = (2025, 2026)
+ROBUSTNESS_MODELS = ("tdl", "issm_xv", "linear")
+N_JOBS = 2
+RANDOM_STATE = 0
+
+PAPER_TDL = dict(
+    output_lags=6,
+    input_lags=5,
+    hidden_layer_sizes=(9,),
+    activation="logistic",
+    linear_bypass=False,
+    lag_representation="delays",
+    focus="prediction",
+)
+PAPER_ISSM = dict(
+    n_states=3,
+    hidden_layer_sizes=(7,),
+    focus="prediction",
+    linear_part=False,
+    activation="logistic",
+)
+
+# name -> (label, estimator family, measured outputs, constructor kwargs)
+MODELS = {
+    "tdl": ("TDL default", "tdl", "x", {}),
+    "tdl_paper": ("TDL paper (6/5 lags, 9 logistic, one-step)", "tdl", "x", PAPER_TDL),
+    "issm_xv": ("ISSM default, X+V measured (p=2)", "issm", "xv", {}),
+    "issm_x": ("ISSM default, X only (p=1)", "issm", "x", {}),
+    "issm_paper": ("ISSM paper (3 states, 7 logistic, one-step, p=2)", "issm", "xv", PAPER_ISSM),
+    "linear": ("Linear (TDL hidden_layer_sizes=())", "tdl", "x", {"hidden_layer_sizes": ()}),
+}
+QUICK_MODELS = ("tdl", "linear")
+
+
+def make_estimator(family: str, kwargs: dict, quick: bool):
+    params = dict(kwargs, random_state=RANDOM_STATE, n_jobs=N_JOBS)
+    if quick:
+        params.update(max_iter=30, n_init=2)
+    if family == "tdl":
+        return TDLRegressor(**params)
+    return ISSMRegressor(**params)
+
+
+def evaluate(name: str, split: P.Split, quick: bool) -> dict:
+    """Fit one model on one split and score it on the test records."""
+    label, family, outputs, kwargs = MODELS[name]
+    p = 2 if outputs == "xv" else 1
+    row = {"model": name, "label": label, "dt": split.dt, "protocol": split.protocol}
+    est = make_estimator(family, kwargs, quick)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        t0 = time.perf_counter()
+        try:
+            est.fit(split.X_train, split.y_train, X_val=split.X_val, y_val=split.y_val)
+        except Exception as exc:  # report, do not abort the whole benchmark
+            row["error"] = f"{type(exc).__name__}: {exc}"[:200]
+            return row
+        row["fit_s"] = time.perf_counter() - t0
+    row["fit_warnings"] = ";".join(sorted({type(w.message).__name__ for w in caught}))
+
+    X, Y, dt = split.X_test, split.y_test, split.dt
+    k0 = int(round(P.T0_MEASURED / dt))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = est.simulate(X)
+        sim_k0 = [P.simulate_from_measured(est, x, y, k0, p) for x, y in zip(X, Y)]
+        preds = {k: est.predict(X, Y, horizon=k) for k in P.HORIZONS}
+
+    free = [P.record_nrmse(y, s) for y, s in zip(Y, sim)]
+    row["n_divergent"] = int(sum(not np.all(np.isfinite(s)) for s in sim))
+    row["n_divergent_k0"] = int(sum(not np.all(np.isfinite(s)) for s in sim_k0))
+    for key, vals in (
+        ("free", free),
+        ("free_k0", [P.record_nrmse(y[k0:], s) for y, s in zip(Y, sim_k0)]),
+        ("free_hp", [P.record_nrmse_highpass(y, s, dt) for y, s in zip(Y, sim)]),
+    ):
+        for stat, v in P.summary(vals).items():
+            row[f"{key}_{stat}"] = v
+    for k, pred in preds.items():
+        s = P.summary([P.record_nrmse(y, yp) for y, yp in zip(Y, pred)])
+        row[f"k{k}_median"], row[f"k{k}_mean"] = s["median"], s["mean"]
+    tests = [P.residual_tests(P.first_col(y) - P.first_col(yp), x)
+             for x, y, yp in zip(X, Y, preds[1])]
+    row["white_pass"] = float(np.mean([t[0] for t in tests]))
+    row["xcorr_pass"] = float(np.mean([t[1] for t in tests]))
+    row["n_test"] = len(X)
+    return row
+
+
+# ------------------------------------------------------------- reporting
+def fmt(v, digits=3) -> str:
+    if v is None or (isinstance(v, float) and np.isnan(v)):
+        return "-"
+    if isinstance(v, float):
+        if np.isinf(v):
+            return "div"
+        return f"{v:.{digits}g}"
+    return str(v)
+
+
+COLUMNS = [
+    ("fit s", lambda r: fmt(r.get("fit_s"), 3)),
+    ("free mean", lambda r: fmt(r.get("free_mean"))),
+    ("free median", lambda r: fmt(r.get("free_median"))),
+    ("free worst", lambda r: fmt(r.get("free_worst"))),
+    ("ratio to linear", lambda r: fmt(r.get("ratio"), 2)),
+    ("div", lambda r: fmt(r.get("n_divergent"))),
+    ("from t0 median", lambda r: fmt(r.get("free_k0_median"))),
+    ("from t0 worst", lambda r: fmt(r.get("free_k0_worst"))),
+    (">0.3 Hz median", lambda r: fmt(r.get("free_hp_median"))),
+    (">0.3 Hz worst", lambda r: fmt(r.get("free_hp_worst"))),
+    ("k=1", lambda r: fmt(r.get("k1_median"))),
+    ("k=10", lambda r: fmt(r.get("k10_median"))),
+    ("k=50", lambda r: fmt(r.get("k50_median"))),
+    ("white %", lambda r: fmt(100 * r["white_pass"], 3) if "white_pass" in r else "-"),
+    ("xcorr %", lambda r: fmt(100 * r["xcorr_pass"], 3) if "xcorr_pass" in r else "-"),
+]
+
+
+def add_ratios(rows: list[dict]) -> None:
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault((r["seed"], r["dt"], r["protocol"]), []).append(r)
+    for group in groups.values():
+        lin = next((r for r in group if r["model"] == "linear" and "free_median" in r), None)
+        for r in group:
+            if lin is not None and "free_median" in r:
+                r["ratio"] = r["free_median"] / lin["free_median"]
+
+
+def table(rows: list[dict]) -> list[str]:
+    head = "| model | " + " | ".join(c for c, _ in COLUMNS) + " |"
+    lines = [head, "|" + "---|" * (len(COLUMNS) + 1)]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['label']} | fit failed: {r['error']} |" + " |" * (len(COLUMNS) - 1))
+            continue
+        lines.append(f"| {r['label']} | " + " | ".join(f(r) for _, f in COLUMNS) + " |")
+    return lines
+
+
+def find(rows, seed, dt, protocol, model):
+    for r in rows:
+        if (r["seed"], r["dt"], r["protocol"], r["model"]) == (seed, dt, protocol, model):
+            return r if "free_median" in r else None
+    return None
+
+
+def targets(rows: list[dict], seed: int) -> list[str]:
+    out = []
+
+    def verdict(ok):
+        return "not measured" if ok is None else ("**met**" if ok else "**not met**")
+
+    def ratio_target(model, protocol, limit, extra_div=False):
+        r = find(rows, seed, 0.01, protocol, model)
+        if r is None or "ratio" not in r:
+            return None, ""
+        ok = r["ratio"] <= limit and (not extra_div or r["n_divergent"] == 0)
+        txt = f"ratio {r['ratio']:.3f} (median {r['free_median']:.4f})"
+        if extra_div:
+            txt += f", {r['n_divergent']} divergent"
+        return ok, txt
+
+    for model, name, limits, div in (
+        ("tdl", "TDL default", {"P1": 0.1, "P5": 0.05}, True),
+        ("issm_xv", "ISSM default (p=2)", {"P1": 0.05, "P5": 0.03}, False),
+    ):
+        for protocol, limit in limits.items():
+            ok, txt = ratio_target(model, protocol, limit, div)
+            cond = f"ratio <= {limit}" + (", no divergent simulation" if div else "")
+            out.append(f"- dt = 0.01, {protocol}, {name}: {cond}: {verdict(ok)}" + (f" ({txt})" if txt else ""))
+    for protocol in P.PROTOCOLS:
+        a, b = find(rows, seed, 0.01, protocol, "issm_x"), find(rows, seed, 0.01, protocol, "tdl")
+        if a is None or b is None:
+            out.append(f"- dt = 0.01, {protocol}, ISSM X only at least as good as the TDL: not measured")
+            continue
+        ok = a["free_median"] <= b["free_median"]
+        out.append(
+            f"- dt = 0.01, {protocol}, ISSM X only at least as good as the TDL (median free run): "
+            f"{verdict(ok)} ({a['free_median']:.4f} vs {b['free_median']:.4f})"
+        )
+    for model in ("tdl", "issm_xv", "issm_x"):
+        r = find(rows, seed, 0.03, "P5", model)
+        if r is None or "ratio" not in r:
+            out.append(f"- dt = 0.03, P5, {MODELS[model][0]} better than linear: not measured")
+            continue
+        out.append(
+            f"- dt = 0.03, P5, {MODELS[model][0]} better than linear: {verdict(r['ratio'] < 1)} "
+            f"(ratio {r['ratio']:.3f})"
+        )
+    for dt in (0.01, 0.03):
+        for protocol in P.PROTOCOLS:
+            lin = find(rows, seed, dt, protocol, "linear")
+            for model in ("tdl", "issm_xv", "issm_x"):
+                r = find(rows, seed, dt, protocol, model)
+                if r is None or lin is None:
+                    continue
+                # "clearly better": at most half the linear model's median error
+                r10, r50 = r["k10_median"] / lin["k10_median"], r["k50_median"] / lin["k50_median"]
+                ok = r10 <= 0.5 and r50 <= 0.5
+                out.append(
+                    f"- dt = {dt}, {protocol}, {MODELS[model][0]}: k-step (10, 50) clearly better "
+                    f"than linear (ratio <= 0.5): {verdict(ok)} (ratios {r10:.3f}, {r50:.3f})"
+                )
+    r = find(rows, seed, 0.01, "P5", "tdl")
+    ok = None if r is None else r["fit_s"] < 60
+    out.append(
+        "- TDL default fit time, P5, dt = 0.01, under a minute on 2 cores: "
+        + verdict(ok)
+        + ("" if r is None else f" ({r['fit_s']:.1f} s)")
+    )
+    return out
+
+
+def machine_info() -> list[str]:
+    import numba
+    import scipy
+    import sklearn
+
+    import sysid_nn
+
+    return [
+        f"- date: {datetime.datetime.now().isoformat(timespec='seconds')}",
+        f"- python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
+        f"numba {numba.__version__}, scikit-learn {sklearn.__version__}, sysid_nn {sysid_nn.__version__}",
+        f"- {platform.platform()}, {platform.processor() or platform.machine()}, "
+        f"{os.cpu_count()} CPUs (shared with other work: times are noisy, compare ratios within one run)",
+    ]
+
+
+def write_report(rows, args, elapsed, out_dir: Path, seeds_main, issm_note) -> None:
+    lines = [
+        "# Accuracy benchmark",
+        "",
+        f"Command: `python benchmarks/bench_accuracy.py {' '.join(args.argv)}`".rstrip() + f" "
+        f"(run time {elapsed / 60:.1f} min)",
+        "",
+        *machine_info(),
+        "",
+        "## Protocol",
+        "",
+        f"Pool of {P.N_POOL} realisations of `HystereticOscillator().generate(n, n_samples=2000, "
+        f"dt=0.01, random_state=seed)` (seed {seeds_main}), ordered by closeness of the peak "
+        "displacement to the pool's median peak. P1 trains on the first record, P5 on the first "
+        f"five; the next {P.N_VAL} validate (`X_val, y_val`); the test set is the {P.N_TEST} "
+        f"records after the first {P.N_RESERVED} (the same for P1 and P5). dt = 0.03 uses every "
+        "third sample (`x[::3]`). Every estimator has `random_state=0, n_jobs=2` and otherwise the "
+        "parameters named in the row.",
+        "",
+        "Scores are NRMSE (RMS error / std of the measured signal) per test record, "
+        "displacement only: free run from zero initial conditions (mean, median, worst; "
+        "`div` = divergent runs, scored as infinite); free run started at t0 = 2 s from measured "
+        "outputs (TDL: `initial_outputs` = the measured outputs before t0; ISSM: `initial_state` "
+        "= the measured outputs at t0 - dt as the first p states, zeros elsewhere; the "
+        "estimator's history is given the measured excitation before t0, since the public "
+        "`simulate` assumes zero excitation before the start) scored from t0; the zero-initial "
+        "free run with both signals zero-phase high-passed above 0.3 Hz (oscillatory part, "
+        "without the drift/permanent set); k-step prediction medians (`predict(X, y, horizon=k)`); "
+        "percentage of test records whose one-step residuals pass the whiteness test and the "
+        "cross-correlation test (both lag sides), max lag 25, 5 % level. Ratio = median free-run "
+        "NRMSE / the linear model's.",
+        "",
+    ]
+    if issm_note:
+        lines += [issm_note, ""]
+    seeds = sorted({r["seed"] for r in rows})
+    for seed in seeds:
+        for dt in sorted({r["dt"] for r in rows if r["seed"] == seed}):
+            for protocol in P.PROTOCOLS:
+                sub = [r for r in rows if (r["seed"], r["dt"], r["protocol"]) == (seed, dt, protocol)]
+                if not sub:
+                    continue
+                tr = sub[0].get("train_idx")
+                lines += [f"## dt = {dt} s, {protocol}, seed {seed}", ""]
+                lines += [f"Training records {tr}, validation {sub[0].get('val_idx')}.", ""]
+                lines += table(sub) + [""]
+    main_seed = seeds_main
+    lines += ["## Targets", ""] + targets(rows, main_seed) + [""]
+    rob = [r for r in rows if r["seed"] != main_seed and "free_median" in r]
+    if rob:
+        lines += ["## Spread over pool seeds (P1, dt = 0.01, median free-run NRMSE / ratio)", ""]
+        for model in ROBUSTNESS_MODELS:
+            vals = [
+                (s, find(rows, s, 0.01, "P1", model)) for s in seeds
+            ]
+            txt = ", ".join(
+                f"seed {s}: {r['free_median']:.4f}"
+                + (f" / {r['ratio']:.3f}" if "ratio" in r else "")
+                + (f" ({r['n_divergent']} div)" if r["n_divergent"] else "")
+                for s, r in vals
+                if r is not None
+            )
+            if txt:
+                lines.append(f"- {MODELS[model][0]}: {txt}")
+        lines.append("")
+    (out_dir / "results.md").write_text("\n".join(lines))
+    keys = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with open(out_dir / "results_accuracy.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=keys)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (str(v) if isinstance(v, list) else v) for k, v in r.items()})
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="smoke test (~1 min)")
+    ap.add_argument("--protocols", default=None, help="comma list, e.g. P1,P5")
+    ap.add_argument("--dt", default=None, help="comma list, e.g. 0.01,0.03")
+    ap.add_argument("--models", default=None, help=f"comma list of {', '.join(MODELS)}")
+    ap.add_argument("--seed", type=int, default=DEFAULT_SEED, help="pool seed")
+    ap.add_argument(
+        "--robustness-seeds",
+        default=None,
+        help="extra pool seeds for P1 at dt = 0.01 (default 2025,2026; 'none' to skip)",
+    )
+    ap.add_argument("--out", default=None, help="output directory")
+    args = ap.parse_args(argv)
+    args.argv = argv
+    quick = args.quick
+    protocols = (args.protocols or ("P1" if quick else "P1,P5")).split(",")
+    dts = [float(d) for d in (args.dt or ("0.01" if quick else "0.01,0.03")).split(",")]
+    models = (args.models or (",".join(QUICK_MODELS) if quick else ",".join(MODELS))).split(",")
+    for m in models:
+        if m not in MODELS:
+            ap.error(f"unknown model {m!r}; choose from {', '.join(MODELS)}")
+    rob_arg = args.robustness_seeds or ("none" if quick else ",".join(map(str, ROBUSTNESS_SEEDS)))
+    rob_seeds = [] if rob_arg == "none" else [int(s) for s in rob_arg.split(",")]
+    out_dir = Path(args.out) if args.out else (
+        Path(tempfile.gettempdir()) / "sysid_nn_bench_quick" if quick else HERE
+    )
+    out_dir.mkdir(parents=True, exist_ok=True)
+
+    issm_note = ""
+    if ISSMRegressor is None:
+        dropped = [m for m in models if MODELS[m][1] == "issm"]
+        models = [m for m in models if MODELS[m][1] != "issm"]
+        if dropped:
+            issm_note = f"ISSMRegressor is not available in this tree: {', '.join(dropped)} not run."
+            print(issm_note, flush=True)
+
+    start = time.perf_counter()
+    rows: list[dict] = []
+    jobs = [(args.seed, dt, pr, m) for dt in dts for pr in protocols for m in models]
+    jobs += [
+        (s, 0.01, "P1", m) for s in rob_seeds for m in ROBUSTNESS_MODELS if m in models
+    ]
+    pools: dict = {}
+    n_test = 5 if quick else P.N_TEST
+    for seed, dt, protocol, model in jobs:
+        if seed not in pools:
+            pools[seed] = P.make_pool(seed)
+        split = P.make_split(pools[seed], protocol, dt, MODELS[model][2], n_test=n_test)
+        t0 = time.perf_counter()
+        row = evaluate(model, split, quick)
+        row.update(seed=seed, train_idx=split.train_idx, val_idx=split.val_idx)
+        rows.append(row)
+        status = row.get("error") or (
+            f"fit {row['fit_s']:.1f} s, free median {row['free_median']:.4f}, "
+            f"worst {fmt(row['free_worst'])}, div {row['n_divergent']}, "
+            f"k10 {row['k10_median']:.4f}, k50 {row['k50_median']:.4f}"
+        )
+        print(
+            f"[{time.perf_counter() - start:6.0f} s] seed {seed} dt {dt} {protocol} {model}: "
+            f"{status} ({time.perf_counter() - t0:.0f} s)",
+            flush=True,
+        )
+        add_ratios(rows)
+        write_report(rows, args, time.perf_counter() - start, out_dir, args.seed, issm_note)
+    elapsed = time.perf_counter() - start
+    write_report(rows, args, elapsed, out_dir, args.seed, issm_note)
+    print((out_dir / "results.md").read_text())
+    print(f"wrote {out_dir / 'results.md'} and results_accuracy.csv in {elapsed / 60:.1f} min")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
