@@ -102,7 +102,11 @@ def tdl_run(
     n_z = sizes[0]
     n_w = w.shape[0]
     width = np.max(sizes)
+    n_a = A.shape[1]
     phi = np.empty(n_reg)
+    z = np.empty(n_z)
+    acts = np.zeros(n_a)
+    gw = np.empty(n_w)
     out = np.empty(n_out)
     v = np.zeros(n_out)
     gz = np.empty(n_z)
@@ -122,8 +126,14 @@ def tdl_run(
             if (t - a - h) % seg_len == 0:
                 seg_start = t
             _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi)
-            _matvec(S, phi, Z[t])
-            mlp_forward(w, sizes, act, bypass, Z[t], A[t], out)
+            _matvec(S, phi, z)
+            mlp_forward(w, sizes, act, bypass, z, acts, out)
+            # Kept per row for the adjoint pass; copied from contiguous
+            # scratch buffers rather than writing through per-row views.
+            for i in range(n_z):
+                Z[t, i] = z[i]
+            for i in range(n_a):
+                A[t, i] = acts[i]
             if _out_of_range(out, bound):
                 diverged[s] = t - a - h
                 for tt in range(t, b):
@@ -137,11 +147,10 @@ def tdl_run(
             r0 = row_base + (t - a - h) * n_out
             for j in range(n_out):
                 row = r0 + j
-                for c in range(n_w):
-                    J[row, c] = 0.0
+                gw[:] = 0.0
                 v[:] = 0.0
                 v[j] = 1.0
-                mlp_vjp(w, sizes, act, bypass, Z[t], A[t], v, J[row], gz, d1, d2)
+                mlp_vjp(w, sizes, act, bypass, z, acts, v, gw, gz, d1, d2)
                 _rmatvec(S, gz, gphi)
                 # Eq. 6 carried through the delay line: add the sensitivities
                 # of the fed-back outputs of this segment.
@@ -154,7 +163,9 @@ def tdl_run(
                         coef = gphi[(i - 1) * n_out + k]
                         if coef != 0.0:
                             for c in range(n_w):
-                                J[row, c] += coef * J[srow + k, c]
+                                gw[c] += coef * J[srow + k, c]
+                for c in range(n_w):
+                    J[row, c] = gw[c]
         row_base += (b - a - h) * n_out
 
 
