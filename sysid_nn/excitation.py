@@ -418,6 +418,7 @@ def multisine(
     Returns
     -------
     ndarray of shape (n_samples,) or (n_realizations, n_samples)
+        The multisine, one row per realisation, with the requested RMS.
 
     Examples
     --------

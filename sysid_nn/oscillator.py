@@ -377,7 +377,7 @@ class HystereticOscillator(BaseEstimator):
         random_state: int | np.random.RandomState | None = None,
         as_frame: bool = False,
     ) -> Bunch:
-        """Records of the oscillator under the paper's excitation.
+        """Generate records of the oscillator under the paper's excitation.
 
         Each realisation draws broken-line white noise, modulates it by
         ``r(t)`` (eq. 18) with strength ``r0``, filters it through the
