@@ -192,6 +192,14 @@ class _RecurrentRegressorBase(BaseEstimator):
     def _penalty_mask(self) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
+    def __setstate__(self, state):
+        # joblib may restore arrays as read-only memory maps; numba compiles a
+        # separate specialisation for read-only arrays, so keep plain copies.
+        for key, value in state.items():
+            if isinstance(value, np.ndarray) and not value.flags.writeable:
+                state[key] = np.array(value)
+        super().__setstate__(state)
+
     # --------------------------------------------------------- validation
     def _validate_Xy(self, X, y=None, *, reset: bool, y_required: bool):
         """Validate one sequence or a list of them.
