@@ -105,15 +105,20 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     **Starting point.** The linear part starts exactly at a linear model
     fitted to the data: a least-squares ARX model (three output and three
     input lags, at the given delay, on the standardised data) in observer
-    form, whose ARX predictor gain is the starting ``K``. It is put in fixed
+    form, put in fixed
     state coordinates in which the measured outputs are the first ``p``
     states and each remaining state is a remaining ARX direction,
     decorrelated from the outputs (least-squares residual), taken in order of
     variance along the training data (principal components) and scaled to
-    unit variance, with zero at the state of the system at rest. When
-    ``n_states`` is smaller than the ARX order, the directions of least
-    variance are dropped; when larger, the ARX gets more lags
-    (``ceil(n_states / p)``). The network's output weights start at zero, so
+    unit variance, with zero at their mean where the training records start
+    (the rest state for records starting at rest). When ``n_states`` is
+    smaller than the ARX order, the directions of least variance are
+    dropped; when larger, the ARX gets more lags (``ceil(n_states / p)``).
+    ``A``, ``B`` and ``c`` are then fitted by least squares to these states
+    with ``K = A H^T``, the gain that feeds the measured outputs in place of
+    the measured states (the ARX predictor's own gain, or a free
+    least-squares one, gave an unstable reduced predictor on the hysteretic
+    oscillator). The network's output weights start at zero, so
     training starts at the linear model; ``hidden_layer_sizes=()`` is the
     linear innovation model itself.
 
@@ -494,64 +499,66 @@ default=None
     def _prepare_structure(self, data: _Data) -> None:
         self._sizes_ = self._sizes()
         self._act = ACTIVATIONS[self.activation]
-        p, n = self.n_outputs_, self.n_states_
+        p, n, nk = self.n_outputs_, self.n_states_, self.input_delay
         lags = max(_ARX_LAGS, ceil(n / p))
         A_i, B_j, c, rows = self._arx(data, lags)
-        N = lags * p
-        # Observer form: block i of the state holds the part of the future
-        # ARX prediction already fixed by data up to t-1, block 0 is yhat(t).
-        A_o = np.zeros((N, N))
-        B_o = np.vstack(B_j)
-        K_o = np.vstack(A_i)
-        A_o[:, :p] = K_o
-        A_o[: N - p, p:] += np.eye(N - p)
-        c_o = np.zeros(N)
-        c_o[:p] = c
-        # Observer-form states along the training data (one-step predictor).
-        xi = np.zeros((len(rows), N))
-        nk = self.input_delay
+        # Observer-form ARX states along the data: block i is the part of
+        # the prediction of y(t + i) already fixed by data up to t - 1, so
+        # block 0 is the one-step prediction yhat(t).
+        xi = np.zeros((len(rows), lags * p))
         for i in range(lags):
             for j in range(i, lags):
-                lag = j - i
-                xi[:, i * p : (i + 1) * p] += data.Y[rows - 1 - lag] @ A_i[j].T
-                xi[:, i * p : (i + 1) * p] += data.U[rows - nk - lag] @ B_j[j].T
+                xi[:, i * p : (i + 1) * p] += data.Y[rows - 1 - j + i] @ A_i[j].T
+                xi[:, i * p : (i + 1) * p] += data.U[rows - nk - j + i] @ B_j[j].T
         xi[:, :p] += c
-        T, P = self._state_coordinates(xi, p, n)
-        # Zero of the unmeasured states: the system at rest (zero output and
-        # input in the user's units).
-        y0, u0 = -self._y_mean / self._y_scale, -self._x_mean / self._x_scale
-        rest = np.concatenate(
+        x = xi @ self._state_coordinates(xi, p, n).T
+        # Zero of the unmeasured states: their mean where the training
+        # records start (the rest state for records that start at rest).
+        first = np.flatnonzero(np.diff(rows, prepend=-2) != 1)
+        x[:, p:] -= x[first, p:].mean(axis=0)
+        self.linear_model_ = self._fit_linear_model(data, rows, x)
+
+    def _fit_linear_model(self, data: _Data, rows: np.ndarray, x: np.ndarray):
+        """Least-squares linear innovation model on the ARX-derived states.
+
+        ``x(t) = A [y(t-1); x_u(t-1)] + B u(t-nk) + c`` with ``x_u`` the
+        unmeasured states, i.e. ``K = A H^T`` in
+        ``x(t) = A x(t-1) + B u(t-nk) + K e(t-1) + c``.
+        """
+        p, n, m = self.n_outputs_, self.n_states_, self.n_features_in_
+        pairs = np.flatnonzero(np.diff(rows) == 1) + 1
+        t = rows[pairs]
+        # K = A H^T: the one-step predictor feeds the measured outputs in
+        # place of the measured states. A free least-squares K made the
+        # reduced predictor unstable on the hysteretic oscillator.
+        design = np.hstack(
             [
-                sum(A_i[j] @ y0 + B_j[j] @ u0 for j in range(i, lags))
-                for i in range(lags)
+                data.Y[t - 1],
+                x[pairs - 1, p:],
+                data.U[t - self.input_delay],
+                np.ones((len(t), 1)),
             ]
         )
-        rest[:p] += c
-        d = np.zeros(n)
-        d[p:] = -(T @ rest)[p:]
-        A = T @ A_o @ P
-        self.linear_model_ = Bunch(
-            A=A,
-            B=T @ B_o,
-            K=T @ K_o if p > 1 else A[:, :p].copy(),
-            c=T @ c_o + d - A @ d,
-        )
+        theta = np.zeros((design.shape[1], n))
+        if len(t):
+            theta, *_ = np.linalg.lstsq(design, x[pairs], rcond=None)
+        A, B = theta[:n].T, theta[n : n + m].T
+        K = A[:, :p].copy()
+        return Bunch(A=A, B=B, K=K, c=theta[-1])
 
     @staticmethod
-    def _state_coordinates(xi: np.ndarray, p: int, n: int):
-        """Fixed map ``x = T xi`` with a left inverse ``P`` (``T P = I``).
+    def _state_coordinates(xi: np.ndarray, p: int, n: int) -> np.ndarray:
+        """Fixed map ``x = T xi`` from observer-form to model states.
 
         The first ``p`` states are the predicted outputs themselves; the
         others are the remaining observer-form directions with the part
         explained by the outputs removed (least-squares residual), ordered by
         variance along the training data and scaled to unit variance.
-        Directions beyond ``n`` are dropped; ``P`` then reconstructs ``xi``
-        from the kept ones in the least-squares sense.
+        Directions beyond ``n`` are dropped.
         """
         N = xi.shape[1]
-        r = n - p
-        T, P = np.zeros((n, N)), np.zeros((N, n))
-        T[:p, :p] = P[:p, :p] = np.eye(p)
+        T = np.zeros((n, N))
+        T[:p, :p] = np.eye(p)
         if len(xi) > 1:
             centred = xi - xi.mean(axis=0)
             out, rest = centred[:, :p], centred[:, p:]
@@ -560,7 +567,7 @@ default=None
         else:
             C, resid = np.zeros((p, N - p)), np.zeros((1, N - p))
         var, V = np.linalg.eigh(resid.T @ resid / max(1, len(resid)))
-        var, V = var[::-1][:r], V[:, ::-1][:, :r]
+        var, V = var[::-1][: n - p], V[:, ::-1][:, : n - p]
         # Directions the data barely excite (an ARX of higher order than the
         # system) keep a bounded scale instead of blowing up.
         total = float(np.var(xi, axis=0).sum()) if len(xi) > 1 else 1.0
@@ -568,9 +575,7 @@ default=None
         W = V.T / np.sqrt(var)[:, None]
         T[p:, p:] = W
         T[p:, :p] = -W @ C.T
-        P[p:, :p] = C.T
-        P[p:, p:] = V * np.sqrt(var)[None, :]
-        return T, P
+        return T
 
     def _layers(self):
         """``(weight_offset, bias_offset, n_out, n_in)`` per layer; bypass offset."""

@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import pickle
 import warnings
 
+import joblib
 import numpy as np
 import pytest
+from scipy.linalg import solve_discrete_are
+from sklearn.exceptions import ConvergenceWarning, NotFittedError
+from sklearn.model_selection import GridSearchCV, KFold
+from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from sysid_nn import ISSMRegressor
 from sysid_nn._base import _FREE_RUN
+from sysid_nn._issm import UnstablePredictorWarning
 
 
 # --------------------------------------------------------------------------
@@ -109,3 +116,267 @@ def test_kernel_matches_twin_and_finite_differences(
     np.testing.assert_allclose(
         grad, J.T @ r, rtol=1e-9, atol=1e-10 * np.abs(J.T @ r).max()
     )
+
+
+# --------------------------------------------------------------------------
+# the linear innovation model is the steady-state Kalman predictor
+# --------------------------------------------------------------------------
+A_TRUE = np.array([[1.5, -0.7], [1.0, 0.0]])
+B_TRUE = np.array([1.0, 0.0])
+C_TRUE = np.array([[0.5, 0.3]])
+Q_TRUE = np.diag([0.2, 0.05])
+R_TRUE = np.array([[0.3]])
+
+
+def _linear_gaussian(n, seed):
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(n)
+    w = rng.multivariate_normal(np.zeros(2), Q_TRUE, size=n)
+    v = rng.normal(0.0, np.sqrt(R_TRUE[0, 0]), size=n)
+    x = np.zeros(2)
+    y = np.empty(n)
+    for t in range(n):
+        y[t] = C_TRUE[0] @ x + v[t]
+        x = A_TRUE @ x + B_TRUE * u[t] + w[t]
+    return u[:, None], y
+
+
+def _kalman_predictor():
+    P = solve_discrete_are(A_TRUE.T, C_TRUE.T, Q_TRUE, R_TRUE)
+    S = float((C_TRUE @ P @ C_TRUE.T + R_TRUE)[0, 0])
+    K = A_TRUE @ P @ C_TRUE.T / S
+    return S, K
+
+
+def _kalman_errors(u, y, K):
+    x = np.zeros(2)
+    e = np.empty(len(y))
+    for t in range(len(y)):
+        e[t] = y[t] - C_TRUE[0] @ x
+        x = A_TRUE @ x + B_TRUE * u[t, 0] + K[:, 0] * e[t]
+    return e
+
+
+def test_linear_issm_is_the_kalman_predictor():
+    u, y = _linear_gaussian(20000, 0)
+    u_test, y_test = _linear_gaussian(20000, 1)
+    S, K = _kalman_predictor()
+    model = ISSMRegressor(
+        n_states=2, hidden_layer_sizes=(), focus="prediction", n_init=1,
+        max_iter=60, early_stopping=False, random_state=0,
+    ).fit(u, y)  # fmt: skip
+    e_model = y_test - model.predict(u_test, y_test)
+    e_kalman = _kalman_errors(u_test, y_test, K)
+    skip = 50  # both start from a zero state
+    ratio = np.var(e_model[skip:]) / S
+    ratio_kalman = np.var(e_model[skip:]) / np.var(e_kalman[skip:])
+    assert abs(ratio - 1.0) < 0.03, ratio
+    assert ratio_kalman < 1.01, ratio_kalman
+    # The learned predictor Phi - K H has the Kalman predictor's poles
+    # (coordinates differ; eigenvalues do not).
+    lin = model.predict_states(u_test, y_test)
+    H = np.array([[1.0, 0.0]])
+    M = lin.Phi[100] - lin.K[100] @ H
+    learned = np.sort_complex(np.linalg.eigvals(M))
+    true = np.sort_complex(np.linalg.eigvals(A_TRUE - K @ C_TRUE))
+    np.testing.assert_allclose(learned, true, atol=0.03)
+    assert model.predictor_spectral_radius_ == pytest.approx(
+        np.abs(true).max(), abs=0.03
+    )
+
+
+# --------------------------------------------------------------------------
+# the hysteretic oscillator: the unmeasured state is the hysteretic Z
+# --------------------------------------------------------------------------
+def _nrmse(pred, true):
+    return np.sqrt(np.mean((pred - true) ** 2, axis=0)) / np.std(true, axis=0)
+
+
+@pytest.mark.slow
+def test_oscillator_displacement_and_velocity_measured():
+    from sysid_nn import HystereticOscillator
+
+    rec = HystereticOscillator().generate(10, random_state=0)
+    X = [f[:, None] for f in rec.excitation]
+    Y = [np.column_stack(dv) for dv in zip(rec.displacement, rec.velocity, strict=True)]
+    train, val, test = slice(0, 3), slice(3, 4), slice(6, 10)
+    scores = {}
+    for name, hidden in [("linear", ()), ("network", (7,))]:
+        model = ISSMRegressor(hidden_layer_sizes=hidden, n_init=2, random_state=0)
+        model.fit(X[train], Y[train], X_val=X[val], y_val=Y[val])
+        sim = model.simulate(X[test])
+        one = model.predict(X[test], Y[test])
+        k20 = model.predict(X[test], Y[test], horizon=20)
+        assert all(np.all(np.isfinite(a)) for a in [*sim, *one, *k20])
+        scores[name] = {
+            "sim": np.median(
+                [_nrmse(a, b)[0] for a, b in zip(sim, Y[test], strict=True)]
+            ),
+            "one": np.median(
+                [_nrmse(a, b)[0] for a, b in zip(one, Y[test], strict=True)]
+            ),
+            "k20": np.median(
+                [_nrmse(a, b)[0] for a, b in zip(k20, Y[test], strict=True)]
+            ),
+        }
+        assert model.predictor_spectral_radius_ < 1.0
+    lin, net = scores["linear"], scores["network"]
+    # Free run and 20-step prediction: an order of magnitude better.
+    assert net["sim"] < 0.1 * lin["sim"], scores
+    assert net["k20"] < 0.2 * lin["k20"], scores
+    # One step at dt = 0.01 is nearly trivial for both (NRMSE ~1e-5).
+    assert net["one"] < 1e-3, scores
+    # The unmeasured state tracks the hysteretic component Z.
+    r = []
+    for x, y, z in zip(X[test], Y[test], rec.hysteretic[test], strict=True):
+        states = model.predict_states(x, y).states
+        r.append(abs(np.corrcoef(states[:, 2], z)[0, 1]))
+    assert np.median(r) > 0.8, r
+    print(f"\nscores {scores}, |r(state 3, Z)| median {np.median(r):.3f}")
+
+
+# --------------------------------------------------------------------------
+# scikit-learn conformance
+# --------------------------------------------------------------------------
+ROWS_ARE_TIME = "rows are time steps of a recurrence, not independent samples"
+
+
+@parametrize_with_checks(
+    [ISSMRegressor(hidden_layer_sizes=(3,), n_init=1, max_iter=6, random_state=0)],
+    expected_failed_checks=lambda est: {
+        "check_methods_subset_invariance": ROWS_ARE_TIME,
+        "check_methods_sample_order_invariance": ROWS_ARE_TIME,
+    },
+)
+def test_sklearn_compatible(estimator, check):
+    with warnings.catch_warnings():
+        # Few iterations on random data: not converging is expected here.
+        warnings.simplefilter("ignore", UnstablePredictorWarning)
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        check(estimator)
+
+
+def _sequences(n_seq=6, n=120, p=2, seed=0):
+    rng = np.random.default_rng(seed)
+    X = [rng.standard_normal((n, 1)) for _ in range(n_seq)]
+    y = []
+    for u in X:
+        x = np.zeros(3)
+        out = np.empty((n, p))
+        for t in range(n):
+            out[t] = x[:p]
+            x = np.array(
+                [0.9 * x[0] + 0.1 * x[1], -0.2 * x[0] + 0.8 * x[1], 0.5 * x[2]]
+            )
+            x += np.array([0.0, u[t, 0], np.tanh(x[1])])
+        y.append(out)
+    return X, y
+
+
+def test_grid_search_over_structure_with_kfold_on_sequences():
+    X, y = _sequences()
+    search = GridSearchCV(
+        ISSMRegressor(n_init=1, max_iter=5, random_state=0),
+        {"hidden_layer_sizes": [(), (3,)], "n_states": [2, 3]},
+        cv=KFold(3),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        search.fit(X, y)
+    assert search.best_params_["n_states"] in (2, 3)
+    assert np.isfinite(search.best_score_)
+
+
+def test_pickle_and_joblib_round_trips(tmp_path):
+    X, y = _sequences(3)
+    model = ISSMRegressor(n_init=1, max_iter=5, random_state=0).fit(X, y)
+    path = tmp_path / "issm.joblib"
+    joblib.dump(model, path)
+    for clone in (pickle.loads(pickle.dumps(model)), joblib.load(path)):
+        np.testing.assert_array_equal(clone.simulate(X[0]), model.simulate(X[0]))
+        np.testing.assert_array_equal(
+            clone.predict(X[0], y[0]), model.predict(X[0], y[0])
+        )
+        a, b = clone.predict_states(X[0], y[0]), model.predict_states(X[0], y[0])
+        np.testing.assert_array_equal(a.K, b.K)
+
+
+def test_outputs_mirror_inputs_and_initial_state():
+    X, y = _sequences(3)
+    model = ISSMRegressor(n_init=1, max_iter=5, random_state=0).fit(X, y)
+    assert isinstance(model.simulate(X), list)
+    assert model.simulate(X[0]).shape == y[0].shape
+    res = model.predict_states(X, y)
+    assert len(res) == 3
+    assert res[0].states.shape == (120, 3)
+    assert res[0].Phi.shape == (120, 3, 3)
+    assert res[0].K.shape == (120, 3, 2)
+    # The default initial state is zero outputs and the unmeasured rest state.
+    np.testing.assert_allclose(
+        model.simulate(X[0], initial_state=np.zeros(3)), model.simulate(X[0])
+    )
+    start = model.simulate(X[0], initial_state=[1.0, -1.0, 0.5])
+    assert not np.allclose(start[:5], model.simulate(X[0])[:5])
+    # Measured states in the user's units: the state outputs are the predictions.
+    np.testing.assert_allclose(
+        model.predict_states(X[0], y[0]).states[:, :2], model.predict(X[0], y[0])
+    )
+    # A horizon longer than the record is the free run.
+    np.testing.assert_allclose(
+        model.predict(X[0], y[0], horizon=10_000), model.simulate(X[0])
+    )
+
+
+def test_innovation_refit_leaves_free_run_unchanged():
+    X, y = _sequences(3)
+    model = ISSMRegressor(n_init=1, max_iter=8, random_state=0).fit(X, y)
+    data = model._stack(X, y)
+    stale = model.coefs_.copy()
+    stale[model._innovation_index()] = 0.0
+    before = model._run(stale, data, _FREE_RUN, False)[0]
+    refit = model._refit_innovations(stale, data)
+    np.testing.assert_array_equal(model._run(refit, data, _FREE_RUN, False)[0], before)
+    one = model._run(refit, data, 1, False)[0]
+    one_stale = model._run(stale, data, 1, False)[0]
+    rows = data.modelled
+    assert np.mean((one - data.Y)[rows] ** 2) < np.mean((one_stale - data.Y)[rows] ** 2)
+
+
+def test_unstable_predictor_warns():
+    X, y = _sequences(2)
+    model = ISSMRegressor(n_init=1, max_iter=5, random_state=0).fit(X, y)
+    data = model._stack(X, y)
+    bad = model.coefs_.copy()
+    bad[model._innovation_index()] *= -3.0  # over-correcting innovations
+    model.coefs_ = bad
+    assert model._predictor_radius(bad, data) > 1.0
+    model.focus = "prediction"  # keep _after_fit from repairing it
+    with pytest.warns(UnstablePredictorWarning, match="spectral radius"):
+        model._after_fit(data)
+
+
+@pytest.mark.parametrize(
+    ("X", "y", "params", "match"),
+    [
+        (np.full((50, 1), np.nan), np.zeros(50), {}, "NaN"),
+        (np.zeros(50), np.zeros(50), {}, "Reshape"),
+        (np.zeros((1, 1)), np.zeros(1), {}, "1 sample"),
+        (np.zeros((50, 1)), np.zeros((50, 3)), {"n_states": 2}, "n_states >= 3"),
+    ],
+)
+def test_bad_input_is_explained(X, y, params, match):
+    with pytest.raises(ValueError, match=match):
+        ISSMRegressor(n_init=1, max_iter=2, **params).fit(X, y)
+
+
+def test_bad_calls_after_fit():
+    X, y = _sequences(2)
+    with pytest.raises(NotFittedError):
+        ISSMRegressor().predict(X[0])
+    model = ISSMRegressor(n_init=1, max_iter=3, random_state=0).fit(X, y)
+    with pytest.raises(ValueError, match="expecting 1 features"):
+        model.simulate(np.zeros((10, 2)))
+    with pytest.raises(ValueError, match="n_states = 3"):
+        model.simulate(X[0], initial_state=[0.0, 1.0])
+    with pytest.raises(ValueError, match="fitted with 2"):
+        model.predict(X[0], np.zeros((120, 1)))
