@@ -1,0 +1,231 @@
+"""Tests of the section-4 study (sysid_nn.study) on tiny configurations."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sysid_nn.study import (
+    FIGURES,
+    MODES,
+    PAPER_MODELS,
+    StudyConfig,
+    evaluate,
+    fit_models,
+    generate_data,
+    model_specs,
+    run_study,
+    select_typical,
+    summarize,
+)
+
+# Short records, few lags and iterations: every code path, a few seconds a fit.
+TINY = {
+    "n_samples": 600,
+    "n_test": 3,
+    "n_candidates": 3,
+    "max_lag": 10,
+    "estimator_params": {
+        "all": {"max_iter": 4, "n_init": 2, "n_iter_no_change": 4},
+        "tdl": {"shooting_segments": (20,)},
+        "issm": {"shooting_segments": (20,)},
+    },
+}
+RESULT_COLUMNS = [
+    "realization",
+    "model",
+    "mode",
+    "dt",
+    "nrmse",
+    "fit_percent",
+    "mean",
+    "std",
+    "divergent",
+    "whiteness_p",
+    "whiteness_passed",
+    "cross_positive_p",
+    "cross_positive_passed",
+    "cross_negative_p",
+    "cross_negative_passed",
+]
+
+
+def _tiny(**changes):
+    return StudyConfig(**{**TINY, **changes})
+
+
+def _pipeline(config):
+    data = generate_data(config)
+    models = fit_models(data, config)
+    evaluation = evaluate(models, data, config)
+    return evaluation.results, summarize(evaluation, models)
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    out = tmp_path_factory.mktemp("study") / "results"
+    return run_study(_tiny(seed=7), out)
+
+
+def test_run_study_writes_every_figure_and_table(study):
+    out = study.out_dir
+    names = {p.name for p in out.iterdir()}
+    assert names == {*FIGURES, "results.csv", "summary.csv", "report.md"}
+    for name in FIGURES:
+        png = (out / name).read_bytes()
+        assert png.startswith(b"\x89PNG") and len(png) > 10_000, name
+    results = pd.read_csv(out / "results.csv")
+    assert list(results.columns) == RESULT_COLUMNS
+    assert len(results) == 3 * len(PAPER_MODELS) * len(MODES)
+    assert set(results["model"]) == set(PAPER_MODELS)
+    # The paper's TDL sees every third sample.
+    dt = results.groupby("model")["dt"].first()
+    assert dt["tdl_paper"] == pytest.approx(0.03) and dt["tdl"] == pytest.approx(0.01)
+    summary = pd.read_csv(out / "summary.csv")
+    assert {"mu_Ns", "sigma_Ns", "nrmse_median", "whiteness_pass_rate"} <= set(
+        summary.columns
+    )
+    assert len(summary) == len(PAPER_MODELS) * len(MODES)
+    assert not any(p.name.startswith(".") for p in out.parent.iterdir())
+
+
+def test_report_sections_and_setup(study):
+    report = (study.out_dir / "report.md").read_text()
+    for heading in (
+        "## Results at a glance",
+        "## Setup",
+        "### Models",
+        "## One-step prediction (section 4.3)",
+        "## Free-run simulation (section 4.4)",
+        "## Hysteresis",
+        "## Files",
+    ):
+        assert heading in report
+    for fragment in ("seed=7", "numpy", "logical CPUs", "nearest the median peak"):
+        assert fragment in report
+    for name in FIGURES:
+        assert f"({name})" in report
+    for label in ("TDL (paper)", "ISSM (paper)", "linear (OE)", "ISSM (default)"):
+        assert f"| {label} |" in report
+
+
+def test_summary_reuses_eq_19_20_statistics(study):
+    ev, summary = study.evaluation, study.summary
+    row = summary.query("model == 'issm' and mode == 'simulation'").iloc[0]
+    stats = ev.statistics["simulation"]["ISSM (default)"]
+    assert row["mu_Ns"] == stats.mu and row["sigma_Ns"] == stats.sigma
+    per = ev.results.query("model == 'issm' and mode == 'simulation'")
+    np.testing.assert_allclose(per["mean"].mean(), stats.mu)
+    np.testing.assert_allclose(np.sqrt((per["std"] ** 2).mean()), stats.sigma)
+
+
+def test_training_record_has_typical_amplitude(study):
+    data = study.data
+    peaks = data.candidate_peaks
+    chosen = peaks[data.train_index[0]]
+    assert np.all(np.abs(peaks - np.median(peaks)) >= abs(chosen - np.median(peaks)))
+    np.testing.assert_array_equal(np.max(np.abs(data.train.displacement[0])), chosen)
+
+
+def test_same_seed_serial_and_parallel_identical(study):
+    serial = _pipeline(_tiny(seed=7))
+    parallel = _pipeline(_tiny(seed=7, n_jobs=2))
+    for got in (serial, parallel):
+        pd.testing.assert_frame_equal(got[0], study.results, check_exact=True)
+        pd.testing.assert_frame_equal(got[1], study.summary, check_exact=True)
+    other = _pipeline(_tiny(seed=8, models=("linear",)))[0]
+    assert not np.array_equal(
+        other["nrmse"], study.results.query("model == 'linear'")["nrmse"]
+    )
+
+
+def test_dask_cluster_gives_identical_results(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    config = _tiny(seed=7, models=("linear", "issm"), n_jobs=2)
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
+    ) as cluster:
+        on_dask = run_study(config, tmp_path / "d", scheduler=cluster.scheduler_address)
+    serial = _pipeline(_tiny(seed=7, models=("linear", "issm")))
+    pd.testing.assert_frame_equal(on_dask.results, serial[0], check_exact=True)
+    pd.testing.assert_frame_equal(on_dask.summary, serial[1], check_exact=True)
+
+
+def test_existing_output_is_kept_unless_overwrite(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("x")
+    with pytest.raises(FileExistsError, match="overwrite=True"):
+        run_study(_tiny(), out)
+    assert (out / "keep.txt").exists()
+
+
+def test_failed_run_leaves_nothing(tmp_path, monkeypatch):
+    import sysid_nn.study as study_module
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("interrupted")
+
+    monkeypatch.setattr(study_module, "fit_models", boom)
+    with pytest.raises(RuntimeError, match="interrupted"):
+        run_study(_tiny(), tmp_path / "out")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_overwrite_replaces_directory(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "stale.txt").write_text("x")
+    config = _tiny(models=("linear",), n_test=1)
+    run_study(config, out, overwrite=True)
+    assert not (out / "stale.txt").exists()
+    assert (out / "report.md").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_model_specs_paper_settings_and_overrides():
+    specs = model_specs(StudyConfig(seed=3, n_jobs=2))
+    tdl = specs["tdl_paper"]
+    assert tdl.step == 3 and tdl.outputs == ("displacement",)
+    params = tdl.estimator.get_params()
+    assert (params["output_lags"], params["input_lags"]) == (6, 5)
+    assert params["hidden_layer_sizes"] == (9,) and params["activation"] == "logistic"
+    assert params["focus"] == "prediction" and params["n_jobs"] == 2
+    issm = specs["issm_paper"]
+    assert issm.outputs == ("displacement", "velocity")
+    assert issm.estimator.get_params()["n_states"] == 3
+    assert specs["linear"].estimator.get_params()["hidden_layer_sizes"] == ()
+    quick = model_specs(
+        StudyConfig(quick=True, estimator_params={"tdl": {"max_iter": 2}})
+    )
+    assert quick["tdl"].estimator.get_params()["max_iter"] == 2
+    assert quick["issm"].estimator.get_params()["n_init"] == 1
+
+
+@pytest.mark.parametrize(
+    ("changes", "fragment"),
+    [
+        ({"n_test": 0}, "n_test must be >= 1"),
+        ({"n_train": 0}, "n_train must be >= 1"),
+        ({"n_val": 0}, "n_val"),
+        ({"seed": -1}, "seed"),
+        ({"seed": 2**32}, "seed must be < 2**32"),
+        ({"n_jobs": 0}, "n_jobs"),
+        ({"models": ("tdl", "nope")}, "models"),
+        ({"models": ()}, "models"),
+        ({"n_candidates": 1, "n_train": 2}, "n_candidates"),
+        ({"n_samples": 50}, "n_samples"),
+        ({"alpha": 1.5}, "alpha"),
+        ({"estimator_params": {"tdll": {}}}, "estimator_params"),
+        ({"n_test": 2.5}, "n_test must be an integer"),
+    ],
+)
+def test_config_rejects_bad_values(changes, fragment):
+    with pytest.raises(ValueError, match=fragment.replace("*", r"\*")):
+        StudyConfig(**changes)
+
+
+def test_select_typical():
+    assert select_typical([5.0, 1.0, 3.0, 2.0, 4.0], 1).tolist() == [2]
+    assert select_typical([5.0, 1.0, 3.0, 2.0, 4.0], 3).tolist() == [2, 3, 4]
+    with pytest.raises(ValueError, match="exceeds"):
+        select_typical([1.0], 2)
