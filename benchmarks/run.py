@@ -23,17 +23,25 @@ HERE = Path(__file__).resolve().parent
 def main(argv: list[str]) -> int:
     scripts = sorted(HERE.glob("bench_*.py"))
     if argv:
-        wanted = {f"bench_{name.removeprefix('bench_').removesuffix('.py')}.py" for name in argv}
+        wanted = {
+            f"bench_{name.removeprefix('bench_').removesuffix('.py')}.py"
+            for name in argv
+        }
         unknown = wanted - {s.name for s in scripts}
         if unknown:
-            print(f"unknown benchmark(s): {', '.join(sorted(unknown))}", file=sys.stderr)
+            print(
+                f"unknown benchmark(s): {', '.join(sorted(unknown))}", file=sys.stderr
+            )
             return 2
         scripts = [s for s in scripts if s.name in wanted]
     for script in scripts:
         print(f"=== {script.name}", flush=True)
         start = time.perf_counter()
         runpy.run_path(str(script), run_name="__main__")
-        print(f"=== {script.name} done in {time.perf_counter() - start:.1f} s\n", flush=True)
+        print(
+            f"=== {script.name} done in {time.perf_counter() - start:.1f} s\n",
+            flush=True,
+        )
     return 0
 
 

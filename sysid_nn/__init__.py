@@ -23,9 +23,16 @@ _LAZY = {
     "TDLRegressor": "sysid_nn._tdl",
     "ISSMRegressor": "sysid_nn._issm",
     "DivergenceWarning": "sysid_nn._base",
+    "UnstablePredictorWarning": "sysid_nn._issm",
 }
 
-__all__ = ["DivergenceWarning", "HystereticOscillator", "ISSMRegressor", "TDLRegressor"]
+__all__ = [
+    "DivergenceWarning",
+    "HystereticOscillator",
+    "ISSMRegressor",
+    "TDLRegressor",
+    "UnstablePredictorWarning",
+]
 
 
 def __getattr__(name: str):

@@ -42,7 +42,7 @@ class UnstablePredictorWarning(UserWarning):
 
     Examples
     --------
-    >>> from sysid_nn._issm import UnstablePredictorWarning
+    >>> from sysid_nn import UnstablePredictorWarning
     >>> issubclass(UnstablePredictorWarning, UserWarning)
     True
     """

@@ -25,8 +25,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp
-from sysid_nn._kernels._tdl import _out_of_range
+from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp, out_of_range
 
 
 @njit(cache=True, inline="always")
@@ -103,7 +102,7 @@ def issm_run(
                     e[k] = Y[t - 1, k] - x[k]
             _network_input(x, U, t, nk, e, Z[t])
             mlp_forward(w, sizes, act, bypass, Z[t], A[t], out)
-            if _out_of_range(out, bound):
+            if out_of_range(out, bound):
                 diverged[s] = k_local
                 for tt in range(t, b):
                     for i in range(n):

@@ -152,3 +152,12 @@ def mlp_vjp(w, sizes, act, bypass, z, acts, v, gw, gz, delta, delta_prev):
             for i in range(n_in):
                 delta[i] = delta_prev[i] * _activation_slope(acts[in_off + i], act)
             act_end = in_off
+
+
+@njit(cache=True, inline="always")
+def out_of_range(out, bound):
+    """True when an output is non-finite or beyond ``bound`` (divergence)."""
+    for j in range(out.shape[0]):
+        if not np.abs(out[j]) <= bound:  # also catches NaN
+            return True
+    return False

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp
+from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp, out_of_range
 
 
 @njit(cache=True, inline="always")
@@ -55,14 +55,6 @@ def _rmatvec(S, x, out):
         if xr != 0.0:
             for c in range(S.shape[1]):
                 out[c] += S[r, c] * xr
-
-
-@njit(cache=True, inline="always")
-def _out_of_range(out, bound):
-    for j in range(out.shape[0]):
-        if not np.abs(out[j]) <= bound:  # also catches NaN
-            return True
-    return False
 
 
 @njit(cache=True)
@@ -134,7 +126,7 @@ def tdl_run(
                 Z[t, i] = z[i]
             for i in range(n_a):
                 A[t, i] = acts[i]
-            if _out_of_range(out, bound):
+            if out_of_range(out, bound):
                 diverged[s] = t - a - h
                 for tt in range(t, b):
                     for k in range(n_out):
