@@ -72,7 +72,10 @@ def issm_run(
     coef = np.empty(n)
     d1 = np.empty(width)
     d2 = np.empty(width)
-    lam = np.empty(n_w)  # scratch for d x / d w when only D is wanted
+    n_a = A.shape[1]
+    z = np.empty(n_z)
+    acts = np.zeros(n_a)
+    lam = np.empty(n_w)  # d x_j / d w at this step before the recursion
     psi = np.zeros((n, n_w if want_jac else 0))
     psi_prev = np.zeros((n, n_w if want_jac else 0))
     row_base = 0
@@ -100,8 +103,14 @@ def issm_run(
             if predictor:
                 for k in range(p):
                     e[k] = Y[t - 1, k] - x[k]
-            _network_input(x, U, t, nk, e, Z[t])
-            mlp_forward(w, sizes, act, bypass, Z[t], A[t], out)
+            _network_input(x, U, t, nk, e, z)
+            mlp_forward(w, sizes, act, bypass, z, acts, out)
+            # Kept per row for the adjoint pass; copied from contiguous
+            # scratch buffers rather than writing through per-row views.
+            for i in range(n_z):
+                Z[t, i] = z[i]
+            for i in range(n_a):
+                A[t, i] = acts[i]
             if out_of_range(out, bound):
                 diverged[s] = k_local
                 for tt in range(t, b):
@@ -116,11 +125,8 @@ def issm_run(
             for j in range(n):
                 v[:] = 0.0
                 v[j] = 1.0
-                if want_jac:
-                    psi[j, :] = 0.0
-                    mlp_vjp(w, sizes, act, bypass, Z[t], A[t], v, psi[j], gz, d1, d2)
-                else:
-                    mlp_vjp(w, sizes, act, bypass, Z[t], A[t], v, lam, gz, d1, d2)
+                lam[:] = 0.0
+                mlp_vjp(w, sizes, act, bypass, z, acts, v, lam, gz, d1, d2)
                 if want_lin:
                     for c in range(n_z):
                         D[t, j, c] = gz[c]
@@ -136,7 +142,9 @@ def issm_run(
                     c_i = coef[i]
                     if c_i != 0.0:
                         for c in range(n_w):
-                            psi[j, c] += c_i * psi_prev[i, c]
+                            lam[c] += c_i * psi_prev[i, c]
+                for c in range(n_w):
+                    psi[j, c] = lam[c]
             if want_jac:
                 r0 = row_base + k_local * p
                 for k in range(p):
