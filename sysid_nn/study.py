@@ -30,6 +30,7 @@ cluster.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import platform
 import secrets
@@ -81,7 +82,7 @@ PAPER_MODELS = ("tdl_paper", "issm_paper", "linear", "tdl", "issm")
 _TESTS = ("whiteness", "cross_positive", "cross_negative")
 
 # Reduced training for the CI-sized run (still every figure and table).
-_QUICK_PARAMS = {"n_init": 1, "max_iter": 30, "n_iter_no_change": 10}
+_QUICK_PARAMS = {"n_init": 1}
 
 
 # ----------------------------------------------------------------------------
@@ -128,7 +129,7 @@ class StudyConfig:
         run (see :func:`model_specs`).
     quick : bool, default=False
         CI-sized run: 5 test realisations unless ``n_test`` is given, one
-        restart and fewer iterations per network.
+        restart per network instead of four.
     n_jobs : int or None, default=None
         Parallel jobs of the Monte Carlo evaluation and of the networks'
         restarts (joblib semantics).
@@ -1120,7 +1121,12 @@ def _staged_directory(out_dir: str | os.PathLike, overwrite: bool) -> Iterator[P
             f"output directory {str(out)!r} exists; pass overwrite=True to "
             "replace it, or choose another directory."
         )
-    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except FileExistsError as exc:  # a file where a parent directory should be
+        raise NotADirectoryError(
+            errno.ENOTDIR, "a file is in the way of the output directory", exc.filename
+        ) from None
     # mkdir (not mkdtemp, which makes it private) so the result gets the
     # usual permissions; the random suffix keeps concurrent runs apart.
     tmp = out.parent / f".{out.name}.partial-{secrets.token_hex(6)}"
@@ -1150,7 +1156,13 @@ def _joblib_backend(scheduler: str | None) -> Iterator[None]:
             "scheduler needs dask.distributed; install it with "
             "`pip install sysid_nn[distributed]`."
         ) from exc
-    with Client(scheduler), parallel_backend("dask"):
+    try:
+        client = Client(scheduler)
+    except OSError as exc:  # unreachable or refusing: say which address
+        raise ConnectionError(
+            f"cannot connect to the dask scheduler {scheduler!r}: {exc}"
+        ) from exc
+    with client, parallel_backend("dask"):
         yield
 
 

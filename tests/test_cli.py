@@ -1,0 +1,242 @@
+"""Tests of the ``sysid-nn reproduce``, ``fit`` and ``validate`` commands."""
+
+import joblib
+import numpy as np
+import pandas as pd
+import pytest
+
+from sysid_nn.cli import main
+from sysid_nn.study import FIGURES
+
+
+def _one_error_line(capsys):
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith("sysid-nn: error:")
+    assert "Traceback" not in err[0]
+    return err[0]
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "sysid_nn_results"
+    status = main(
+        ["reproduce", "--quick", "--n-test", "2", "--out", str(out), "--quiet"]
+    )
+    return status, out
+
+
+def test_reproduce_quick_writes_everything(quick_run):
+    status, out = quick_run
+    assert status == 0
+    assert {p.name for p in out.iterdir()} == {
+        *FIGURES,
+        "results.csv",
+        "summary.csv",
+        "report.md",
+    }
+    assert all((out / name).stat().st_size > 10_000 for name in FIGURES)
+    results = pd.read_csv(out / "results.csv")
+    assert set(results["realization"]) == {0, 1}
+    assert {"nrmse", "fit_percent", "mean", "std", "whiteness_passed"} <= set(
+        results.columns
+    )
+    report = (out / "report.md").read_text()
+    assert "## Results at a glance" in report and "quick-run" in report
+
+
+def test_reproduce_existing_output_needs_overwrite(quick_run, capsys):
+    _, out = quick_run
+    before = (out / "results.csv").read_bytes()
+    assert main(["reproduce", "--quick", "--out", str(out)]) == 1
+    line = _one_error_line(capsys)
+    assert str(out) in line and "--overwrite" in line
+    assert (out / "results.csv").read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["--n-test", "0"], "--n-test must be >= 1"),
+        (["--training-records", "0"], "--training-records must be >= 1"),
+        (["--seed", "-1"], "--seed must be >= 0"),
+        (["--seed", str(2**32)], "--seed must be < 2**32"),
+        (["--n-jobs", "0"], "--n-jobs must not be 0"),
+    ],
+)
+def test_reproduce_bad_values_exit_2_with_one_line(tmp_path, capsys, args, fragment):
+    out = tmp_path / "out"
+    assert main(["reproduce", *args, "--out", str(out)]) == 2
+    assert fragment in _one_error_line(capsys)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args", [["--n-test", "x"], ["--quick", "extra"], ["--nope"]])
+def test_reproduce_syntax_errors_exit_2(tmp_path, capsys, args):
+    with pytest.raises(SystemExit) as exc:
+        main(["reproduce", *args, "--out", str(tmp_path / "out")])
+    assert exc.value.code == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert last.startswith(("sysid-nn reproduce: error:", "sysid-nn: error:"))
+
+
+def test_reproduce_unwritable_directory_one_line(tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    assert main(["reproduce", "--quick", "--out", str(blocker / "out")]) == 1
+    line = _one_error_line(capsys)
+    assert "cannot write" in line and str(blocker) in line
+
+
+def test_reproduce_unreachable_scheduler_one_line(tmp_path, capsys):
+    pytest.importorskip("dask.distributed")
+    import dask
+
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        status = main(
+            [
+                "reproduce",
+                "--out",
+                str(tmp_path / "out"),
+                "--scheduler",
+                "tcp://127.0.0.1:9",
+                "--quiet",
+            ]
+        )
+    assert status == 1
+    assert "cannot connect to the dask scheduler" in _one_error_line(capsys)
+    assert list(tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------ fit / validate
+@pytest.fixture(scope="module")
+def records(tmp_path_factory):
+    """Two training files (one experiment each) and a generated multi-record file."""
+    from sysid_nn import HystereticOscillator
+
+    folder = tmp_path_factory.mktemp("records")
+    rec = HystereticOscillator(r0=0.05).generate(
+        4, n_samples=400, random_state=1, as_frame=True
+    )
+    frame = rec.frame.rename(columns={"excitation": "force"})
+    paths = []
+    for j in (0, 1):
+        path = folder / f"exp{j}.csv"
+        part = frame[frame["realization"] == j].drop(columns="realization")
+        part.to_csv(path, index=False)
+        paths.append(path)
+    many = folder / "many.csv"
+    frame[frame["realization"] >= 2].to_csv(many, index=False)
+    return paths, many
+
+
+TINY_FIT = ["--n-init", "1", "--max-iter", "5", "--dt", "0.01"]
+
+
+def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
+    (a, b), many = records
+    model = tmp_path / "model.joblib"
+    argv = ["fit", str(a), str(b), "--input", "force", "--output", "displacement"]
+    argv += ["--hidden", "3", "--output-lags", "2", "--input-lags", "2", *TINY_FIT]
+    assert main([*argv, "--save", str(model)]) == 0
+    assert "fitted TDL" in capsys.readouterr().out
+    bundle = joblib.load(model)
+    assert bundle.model.inputs == ("force",) and bundle.dt == 0.01
+    assert bundle.model.estimator.get_params()["hidden_layer_sizes"] == (3,)
+
+    out = tmp_path / "validation"
+    argv = ["validate", "--model", str(model), str(many), "--split-by", "realization"]
+    assert main([*argv, "--out", str(out), "--max-lag", "10", "--quiet"]) == 0
+    expected = {*list(FIGURES)[1:7], "results.csv", "summary.csv", "report.md"}
+    assert {p.name for p in out.iterdir()} == expected
+    results = pd.read_csv(out / "results.csv")
+    assert sorted(set(results["realization"])) == [0, 1]
+    # The saved model reproduces the validation numbers.
+    est = bundle.model.estimator
+    part = pd.read_csv(many).query("realization == 2")
+    sim = est.simulate(part[["force"]].to_numpy())
+    y = part["displacement"].to_numpy()
+    row = results.query("realization == 0 and mode == 'simulation'").iloc[0]
+    rmse = np.sqrt(np.mean((y - sim) ** 2))
+    np.testing.assert_allclose(row["nrmse"], rmse / np.std(y), rtol=1e-10)
+    assert "## Results at a glance" in (out / "report.md").read_text()
+
+
+def test_fit_issm_two_outputs(records, tmp_path, capsys):
+    (a, _), _ = records
+    model = tmp_path / "issm.joblib"
+    argv = ["fit", str(a), "--input", "force", "--output", "displacement"]
+    argv += ["--output", "velocity", "--model", "issm", "--n-states", "3", *TINY_FIT]
+    assert main([*argv, "--save", str(model)]) == 0
+    est = joblib.load(model).model.estimator
+    assert est.n_outputs_ == 2 and est.n_states_ == 3
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize(
+    ("extra", "fragment"),
+    [
+        (["--output", "nope"], "no column(s) 'nope'"),
+        (
+            ["--output", "displacement", "--model", "tdl", "--n-states", "3"],
+            "--n-states",
+        ),
+        (
+            ["--output", "displacement", "--model", "issm", "--input-lags", "2"],
+            "--input-lags",
+        ),
+    ],
+)
+def test_fit_bad_arguments_exit_2(records, tmp_path, capsys, extra, fragment):
+    (a, _), _ = records
+    argv = ["fit", str(a), "--input", "force", *extra, "--save", str(tmp_path / "m")]
+    assert main(argv) == 2
+    assert fragment in _one_error_line(capsys)
+    assert not (tmp_path / "m").exists()
+
+
+def test_fit_syntax_errors_exit_2(records, tmp_path, capsys):
+    (a, _), _ = records
+    for bad in (["--hidden", "x"], ["--model", "rnn"], ["--dt", "0"]):
+        with pytest.raises(SystemExit) as exc:
+            main(
+                [
+                    "fit",
+                    str(a),
+                    "--input",
+                    "force",
+                    "--output",
+                    "displacement",
+                    *bad,
+                    "--save",
+                    str(tmp_path / "m"),
+                ]
+            )
+        assert exc.value.code == 2
+    with pytest.raises(SystemExit):
+        main(
+            [
+                "fit",
+                str(tmp_path / "data.txt"),
+                "--input",
+                "f",
+                "--output",
+                "y",
+                "--save",
+                "m",
+            ]
+        )
+    capsys.readouterr()
+
+
+def test_missing_files_exit_1_with_one_line(records, tmp_path, capsys):
+    argv = ["fit", str(tmp_path / "none.csv"), "--input", "force", "--output", "x"]
+    assert main([*argv, "--save", str(tmp_path / "m")]) == 1
+    assert "cannot read" in _one_error_line(capsys)
+    junk = tmp_path / "junk.joblib"
+    junk.write_text("not a model")
+    (a, _), _ = records
+    argv = ["validate", "--model", str(junk), str(a), "--out", str(tmp_path / "v")]
+    assert main(argv) == 1
+    assert "cannot read" in _one_error_line(capsys)
+    assert not (tmp_path / "v").exists()
