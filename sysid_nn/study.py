@@ -258,7 +258,7 @@ class StudyConfig:
 # Data
 # ----------------------------------------------------------------------------
 def select_typical(peaks: Sequence[float], k: int) -> np.ndarray:
-    """Indices of the ``k`` records whose peak is nearest the median peak.
+    """Return the indices of the ``k`` records whose peak is nearest the median.
 
     Parameters
     ----------
@@ -306,6 +306,7 @@ def generate_data(config: StudyConfig) -> Bunch:
     Parameters
     ----------
     config : StudyConfig
+        Seeds, numbers of records, their length and sampling step.
 
     Returns
     -------
@@ -399,7 +400,9 @@ class StudyModel:
         Returns
         -------
         X : list of ndarray of shape (n_samples, n_inputs)
+            Excitation of every record, one column per input field.
         y : list of ndarray of shape (n_samples,) or (n_samples, n_outputs)
+            Modelled outputs of every record (1-D for a single output).
         """
         if index is None:
             index = range(len(records[self.inputs[0]]))
@@ -432,6 +435,7 @@ def model_specs(config: StudyConfig) -> dict[str, StudyModel]:
     Returns
     -------
     dict of str to StudyModel
+        The selected models, unfitted, in the order of ``config.models``.
 
     Examples
     --------
@@ -501,6 +505,7 @@ def fit_models(
     data : Bunch
         From :func:`generate_data`.
     config : StudyConfig
+        Which models, their settings and seeds (:func:`model_specs`).
     progress : bool, default=False
         Show a progress bar (stderr).
 
@@ -509,6 +514,16 @@ def fit_models(
     dict of str to StudyModel
         Fitted models; warnings raised while fitting (e.g. not converged) are
         kept in ``data.fit_warnings[name]`` as text.
+
+    Examples
+    --------
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
+    ...                      n_candidates=3, max_lag=10,
+    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> data = generate_data(config)
+    >>> models = fit_models(data, config)
+    >>> models["linear"].estimator.n_features_in_
+    1
     """
     specs = model_specs(config)
     data.fit_warnings = {}
@@ -624,6 +639,20 @@ def evaluate(
         ``{(model, mode): list of error arrays}``; ``analyses``: the
         :class:`~sysid_nn.residuals.ResidualAnalysis` of the first record,
         ``{(model, mode): analysis}``.
+
+    Examples
+    --------
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
+    ...                      n_candidates=3, max_lag=10,
+    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> data = generate_data(config)
+    >>> models = fit_models(data, config)
+    >>> evaluation = evaluate(models, data, config)
+    >>> evaluation.results[["realization", "model", "mode"]].values.tolist()
+    [[0, 'linear', 'prediction'], [0, 'linear', 'simulation'], \
+[1, 'linear', 'prediction'], [1, 'linear', 'simulation']]
+    >>> sorted(evaluation.statistics["simulation"])
+    ['linear (OE)']
     """
     recs = data[records]
     n = len(recs[next(iter(models.values())).inputs[0]])
@@ -668,6 +697,17 @@ def summarize(evaluation: Bunch, models: Mapping[str, StudyModel]) -> pd.DataFra
         n_divergent, nrmse_median, nrmse_mean, fit_percent_median, mu_Ns,
         sigma_Ns`` and ``<test>_pass_rate``. A diverged run counts as an
         infinite NRMSE in the median and is left out of the means.
+
+    Examples
+    --------
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
+    ...                      n_candidates=3, max_lag=10,
+    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> data = generate_data(config)
+    >>> models = fit_models(data, config)
+    >>> summary = summarize(evaluate(models, data, config), models)
+    >>> summary[["label", "mode", "n_realizations"]].values.tolist()
+    [['linear (OE)', 'prediction', 2], ['linear (OE)', 'simulation', 2]]
     """
     rows = []
     for name, model in models.items():
@@ -776,6 +816,7 @@ def hysteresis_loops(
     Parameters
     ----------
     models : dict of str to StudyModel
+        The fitted models, e.g. from :func:`fit_models`.
     data : Bunch
         From :func:`generate_data`.
     evaluation : Bunch
@@ -787,6 +828,17 @@ def hysteresis_loops(
         ``truth``: ``(X, g, Z)``; ``force``: ``{label: (X_m, g_m)}``;
         ``state``: ``{label: (X_m, Z_m)}`` for models with states;
         ``state_correlation``: ``{label: |r|}`` of ``Z_m`` and ``Z``.
+
+    Examples
+    --------
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
+    ...                      n_candidates=3, max_lag=10,
+    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> data = generate_data(config)
+    >>> models = fit_models(data, config)
+    >>> loops = hysteresis_loops(models, data, evaluate(models, data, config))
+    >>> sorted(loops.force), loops.state
+    (['linear (OE)'], {})
     """
     alpha = data.oscillator.get_params()["alpha"]
     x, z = data.test.displacement[0], data.test.hysteretic[0]
@@ -936,7 +988,9 @@ def _glance(summary: pd.DataFrame) -> pd.DataFrame:
             "σ_Ns sim.": s["sigma_Ns"],
             "white (pred.)": _percent(p["whiteness_pass_rate"]),
             "uncorrelated with input (pred.)": _percent(p["cross_positive_pass_rate"]),
-            "diverged (sim.)": f"{s['n_divergent']}/{s['n_realizations']}",
+            "diverged (pred./sim.)": (
+                f"{p['n_divergent']}/{s['n_divergent']} of {s['n_realizations']}"
+            ),
         }
         rows.append(row)
     return pd.DataFrame(rows)
@@ -1036,6 +1090,21 @@ def write_report(
         Figure file names present next to the report (keys of ``FIGURES``).
     extra : dict of str to sequence of str, optional
         Further sections, heading to lines.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
+    ...                      n_candidates=3, max_lag=10,
+    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> data = generate_data(config)
+    >>> models = fit_models(data, config)
+    >>> summary = summarize(evaluate(models, data, config), models)
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "report.md"
+    >>> write_report(path, summary, title="Tiny study", setup=["seed 0"],
+    ...              models=models)
+    >>> path.read_text().splitlines()[0]
+    '# Tiny study'
     """
     has = set(figures)
     rows = []
@@ -1232,6 +1301,18 @@ def run_study(
         ``out_dir`` exists and ``overwrite`` is False (checked first).
     OSError
         ``out_dir`` cannot be written.
+
+    Examples
+    --------
+    The full study takes minutes (see ``benchmarks/results_study.md``);
+    ``StudyConfig(quick=True)`` well under one. An existing directory is
+    refused before any work:
+
+    >>> import tempfile
+    >>> run_study(StudyConfig(quick=True), tempfile.mkdtemp())
+    Traceback (most recent call last):
+    ...
+    FileExistsError: output directory '...' exists; pass overwrite=True to ...
     """
     config = StudyConfig() if config is None else config
     timings: dict[str, float] = {}
@@ -1390,10 +1471,8 @@ def run_validation(
     >>> _ = model.estimator.fit(*model.arrays(records))
     >>> out = pathlib.Path(tempfile.mkdtemp()) / "validation"
     >>> report = run_validation(model, records, out, dt=0.01, max_lag=10)
-    >>> report.summary[["mode", "n_realizations"]].values.tolist()
-    [['prediction', 2], ['simulation', 2]]
-    >>> (out / "report.md").exists()
-    True
+    >>> sorted(p.name for p in out.glob("*.csv"))
+    ['results.csv', 'summary.csv']
     """
     config = StudyConfig(n_jobs=n_jobs, max_lag=max_lag, alpha=alpha)
     models = {"model": model}
