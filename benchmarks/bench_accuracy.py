@@ -116,6 +116,7 @@ def evaluate(name: str, split: P.Split, quick: bool) -> dict:
             row["error"] = f"{type(exc).__name__}: {exc}"[:200]
             return row
         row["fit_s"] = time.perf_counter() - t0
+    row["load_avg_1min"] = os.getloadavg()[0]  # machine load at the end of the fit
     row["fit_warnings"] = ";".join(sorted({type(w.message).__name__ for w in caught}))
 
     X, Y, dt = split.X_test, split.y_test, split.dt
@@ -160,6 +161,7 @@ def fmt(v, digits=3) -> str:
 
 COLUMNS = [
     ("fit s", lambda r: fmt(r.get("fit_s"), 3)),
+    ("load", lambda r: fmt(r.get("load_avg_1min"), 2)),
     ("free mean", lambda r: fmt(r.get("free_mean"))),
     ("free median", lambda r: fmt(r.get("free_median"))),
     ("free worst", lambda r: fmt(r.get("free_worst"))),
@@ -268,7 +270,7 @@ def targets(rows: list[dict], seed: int) -> list[str]:
     out.append(
         "- TDL default fit time, P5, dt = 0.01, under a minute on 2 cores: "
         + verdict(ok)
-        + ("" if r is None else f" ({r['fit_s']:.1f} s)")
+        + ("" if r is None else f" ({r['fit_s']:.1f} s, 1-min load average {r['load_avg_1min']:.1f})")
     )
     return out
 
@@ -319,7 +321,9 @@ def write_report(rows, args, elapsed, out_dir: Path, seeds_main, issm_note) -> N
         "without the drift/permanent set); k-step prediction medians (`predict(X, y, horizon=k)`); "
         "percentage of test records whose one-step residuals pass the whiteness test and the "
         "cross-correlation test (both lag sides), max lag 25, 5 % level. Ratio = median free-run "
-        "NRMSE / the linear model's.",
+        "NRMSE / the linear model's. `fit s` is wall-clock training time and `load` the "
+        "1-minute load average at the end of the fit (2 cores shared with other work: fit times "
+        "above a load of 2 are inflated).",
         "",
     ]
     if issm_note:
