@@ -229,3 +229,18 @@ def test_select_typical():
     assert select_typical([5.0, 1.0, 3.0, 2.0, 4.0], 3).tolist() == [2, 3, 4]
     with pytest.raises(ValueError, match="exceeds"):
         select_typical([1.0], 2)
+
+
+def test_hysteretic_element_reproduces_true_state_from_displacement(study):
+    from sysid_nn.study import _hysteretic_state, hysteresis_loops
+
+    test = study.data.test
+    z = _hysteretic_state(test.displacement[0], study.data.oscillator)
+    scale = np.max(np.abs(test.hysteretic[0]))
+    assert np.max(np.abs(z - test.hysteretic[0])) < 1e-2 * scale
+    loops = hysteresis_loops(study.models, study.data, study.evaluation)
+    labels = {m.label for m in study.models.values()}
+    assert set(loops.force) <= labels
+    assert set(loops.state) <= {"ISSM (paper)", "ISSM (default)"}
+    for label, r in loops.state_correlation.items():
+        assert 0 <= r <= 1, label
