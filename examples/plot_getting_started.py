@@ -123,7 +123,8 @@ print("all tests passed:", report.passed)
 # systematic error, and with thousands of samples the chi-square tests detect
 # even an error of the size printed above. The tests become the decisive
 # check on measured, noisy data; the :ref:`pitfalls` page discusses the
-# point.
+# point and :ref:`sphx_glr_auto_examples_plot_residual_analysis.py` shows
+# the tests at work.
 
 # %%
 # One figure
@@ -147,5 +148,14 @@ plt.show()
 # %%
 # Next steps
 # ----------
+# * :ref:`sphx_glr_auto_examples_plot_tdl_prediction_vs_simulation.py`:
+#   prediction and simulation, training focus, solvers and the paper's
+#   network;
+# * :ref:`sphx_glr_auto_examples_plot_issm.py`: the innovation state-space
+#   network and its hidden hysteretic state;
+# * :ref:`sphx_glr_auto_examples_plot_residual_analysis.py` and
+#   :ref:`sphx_glr_auto_examples_plot_grid_search.py`: validating a model and
+#   choosing its size;
+# * :ref:`sphx_glr_auto_examples_plot_csv_data.py`: your own measured data;
 # * the :ref:`user guide <user_guide>` for the equations and the training
 #   schedule.

@@ -234,4 +234,5 @@ plt.show()
 # %%
 # For a full-size comparison, train with the defaults (``n_init=4``,
 # ``max_iter=150``) on five records and score on 25 unseen ones, as the
-# paper does.
+# paper does; :ref:`sphx_glr_auto_examples_plot_monte_carlo.py` runs a
+# reduced version of that comparison.
