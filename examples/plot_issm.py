@@ -174,16 +174,26 @@ fig.tight_layout()
 # ``Phi[t]`` is :math:`\partial\hat{\mathbf{x}}(t)/\partial\hat{\mathbf{x}}(t-1)`
 # and ``K[t]`` is :math:`\partial\hat{\mathbf{x}}(t)/\partial\mathbf{E}(t-1)`,
 # the transition matrix and gain of an extended Kalman filter (eq. 12). For a
-# linear model they would be constant; here they change with the state, most
-# visibly when the oscillator yields. The one-step predictor propagates
+# linear model they would be constant; here they change with the state along
+# the record. The one-step predictor propagates
 # errors through :math:`\hat{\boldsymbol{\Phi}}(t) - \hat{\mathbf{K}}(t)\mathbf{H}`
 # (eq. 10), which must be stable; the estimator stores the spectral radius
-# of its mean along the training data.
+# of its mean along the training data. The gains are in the units of the
+# states per unit of the innovations: the measured states in metres and
+# metres per second, the hidden one in internal units, so only the gains
+# into the same state compare directly.
 st = states[0]
 H = np.eye(model.n_outputs_, model.n_states_)
 radius_phi = np.abs(np.linalg.eigvals(st.Phi)).max(axis=1)
 radius_pred = np.abs(np.linalg.eigvals(st.Phi - st.K @ H)).max(axis=1)
 print(f"predictor_spectral_radius_ = {model.predictor_spectral_radius_:.4f}")
+for k in range(model.n_states_):
+    for i, name in enumerate(("E₁ (displacement)", "E₂ (velocity)")):
+        gain = st.K[:, k, i]
+        print(
+            f"K[{k}, {i}]: state {k} per unit of {name}: mean {gain.mean():+.4g}, "
+            f"std {gain.std():.3g}"
+        )
 print(
     f"spectral radius of Phi - K H on the test record: "
     f"{radius_pred.min():.4f} to {radius_pred.max():.4f}"
@@ -195,10 +205,9 @@ axes[0].plot(rec.t, radius_pred, linewidth=0.8, label="Phi(t) - K(t) H")
 axes[0].axhline(1.0, color="k", linestyle=":", linewidth=1)
 axes[0].set_ylabel("spectral radius")
 axes[0].legend()
-for k in range(model.n_states_):
-    axes[1].plot(rec.t, st.K[:, k, 0], linewidth=0.8, label=f"K[{k}, 0]")
-axes[1].set_ylabel("gain on E₁ (displacement)")
-axes[1].legend(fontsize="small", ncol=3)
+axes[1].plot(rec.t, st.K[:, 2, 0], linewidth=0.8)
+axes[1].set_ylabel("K[2, 0]")
+axes[1].set_title("gain from the displacement innovation to the hidden state")
 axes[2].plot(rec.t, z / HystereticOscillator().z0, "k-", linewidth=0.8)
 axes[2].set_ylabel("true Z / z0")
 axes[2].set_xlabel("time t [s]")
@@ -206,10 +215,12 @@ fig.tight_layout()
 plt.show()
 
 # %%
-# The third panel shows the true hysteretic component for reference: the
-# linearisation moves when :math:`|Z|` approaches the yield level
-# :math:`z_0`, where the restoring force changes its stiffness. A spectral
-# radius of :math:`\hat{\boldsymbol{\Phi}} - \hat{\mathbf{K}}\mathbf{H}` that
+# The third panel shows the true hysteretic component for reference, to set
+# the changes of the linearisation against the excursions of :math:`Z`
+# towards the yield level :math:`z_0`, where the restoring force changes its
+# stiffness. The gains into the measured states hardly move (see the
+# standard deviations printed above); the gains into the hidden state do. A
+# spectral radius of :math:`\hat{\boldsymbol{\Phi}} - \hat{\mathbf{K}}\mathbf{H}` that
 # stays above one for long stretches would make the one-step predictor drift
 # from the measurements; the estimator then warns with
 # ``UnstablePredictorWarning``.
