@@ -223,4 +223,4 @@ plt.show()
 # spectral radius of :math:`\hat{\boldsymbol{\Phi}} - \hat{\mathbf{K}}\mathbf{H}` that
 # stays above one for long stretches would make the one-step predictor drift
 # from the measurements; the estimator then warns with
-# ``UnstablePredictorWarning``.
+# :class:`~sysid_nn.UnstablePredictorWarning`.
