@@ -152,7 +152,7 @@ def summary(values) -> dict:
     }
 
 
-def simulate_from_measured(model, X, y, k0: int, p: int):
+def simulate_from_measured(model, X, y, k0: int, p: int, filtered: bool = False):
     """Free run started at sample ``k0`` from the measured outputs before it.
 
     TDL: ``initial_outputs`` = the measured outputs ``y[k0 - output_lags:k0]``;
@@ -163,6 +163,11 @@ def simulate_from_measured(model, X, y, k0: int, p: int):
     instead (the excitation is known there), so that the only difference from
     the measured trajectory is the unmeasured state. Returns the simulated
     outputs for samples ``k0..end``.
+
+    ``filtered=True`` (ISSM only): the unmeasured states start at the one-step
+    predictor's (extended Kalman filter's) estimate at ``k0 - 1`` from the
+    measurements before ``k0`` (``predict_states(X[:k0], y[:k0])``) instead
+    of zero.
     """
     cls = type(model)
     hist_x = X[:k0]
@@ -170,7 +175,10 @@ def simulate_from_measured(model, X, y, k0: int, p: int):
         kwargs = {"initial_outputs": y[k0 - model.output_lags : k0]}
     else:
         y0 = np.atleast_1d(y[k0 - 1])
-        kwargs = {"initial_state": np.r_[y0, np.zeros(model.n_states_ - p)]}
+        rest = np.zeros(model.n_states_ - p)
+        if filtered:
+            rest = model.predict_states(X[:k0], y[:k0]).states[-1, p:]
+        kwargs = {"initial_state": np.r_[y0, rest]}
 
     def history(n_seq, initial):
         Yh, Uh = cls._history(model, n_seq, initial)
