@@ -145,8 +145,11 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     ----------
     n_states : int or None, default=None
         Number of states ``n``, at least the number of outputs ``p``.
-        ``None`` uses ``max(3, p + 1)`` (the paper's 3 for displacement and
-        velocity measured).
+        ``None`` uses ``p + 2``: two states beyond the measured ones (4 for
+        displacement and velocity measured, 3 for displacement alone). On the
+        hysteretic oscillator with displacement and velocity measured, 4
+        states halved the free-run error of the paper's 3 (accuracy
+        benchmark).
     input_delay : int, default=1
         Delay ``n_k`` of the excitation seen by the network; 0 gives direct
         feed-through of ``F(t)``.
@@ -397,11 +400,9 @@ default=None
                 f"n_states={self.n_states} is smaller than the number of measured "
                 f"outputs (y has {p} columns). The measured outputs are the first "
                 f"states (H = [I 0]); set n_states >= {p}, or None for "
-                f"max(3, n_outputs + 1)."
+                f"n_outputs + 2."
             )
-        self.n_states_ = (
-            int(self.n_states) if self.n_states is not None else max(3, p + 1)
-        )
+        self.n_states_ = int(self.n_states) if self.n_states is not None else p + 2
 
     def _sizes(self) -> np.ndarray:
         n = self.n_states_
@@ -708,19 +709,28 @@ default=None
         """
         n_res = len(train.modelled) * self.n_outputs_
         objective = _Objective(self, train, 1, self._penalty_mask(), n_res)
-        candidates = [self._substitution_gain(w), w]
-        losses = [objective.loss(c) for c in candidates]
-        start = candidates[int(np.argmin(losses))]
-        if not np.isfinite(min(losses)):
-            return candidates[0]
         idx = self._innovation_index()
-        sub = _Restricted(objective, start, idx)
-        v, _, _ = _solve_lm(
-            sub, start[idx], _INNOVATION_REFIT_ITERS, self.tol, _NoTracker()
-        )
-        out = start.copy()
-        out[idx] = v
-        return out
+        # Zero innovation weights make the predictor the free run itself:
+        # the last resort, stable whenever the simulation is.
+        silent = w.copy()
+        silent[idx] = 0.0
+        candidates = [self._substitution_gain(w), w, silent]
+        start = min(candidates, key=objective.loss)
+        if np.isfinite(objective.loss(start)):
+            sub = _Restricted(objective, start, idx)
+            v, _, _ = _solve_lm(
+                sub, start[idx], _INNOVATION_REFIT_ITERS, self.tol, _NoTracker()
+            )
+            refit = start.copy()
+            refit[idx] = v
+            candidates.insert(0, refit)
+        # Selection keeps the one-step predictor stable: the lowest one-step
+        # loss among the candidates whose innovation form is stable (the refit
+        # alone can leave it unstable).
+        for candidate in sorted(candidates, key=objective.loss):
+            if self._predictor_radius(candidate, train) < 1.0:
+                return candidate
+        return candidates[0]
 
     def _predictor_radius(self, w: np.ndarray, data: _Data) -> float:
         """Spectral radius of the mean ``Phi(t) - K(t) H`` of the one-step predictor."""

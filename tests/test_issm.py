@@ -308,14 +308,15 @@ def test_outputs_mirror_inputs_and_initial_state():
     assert model.simulate(X[0]).shape == y[0].shape
     res = model.predict_states(X, y)
     assert len(res) == 3
-    assert res[0].states.shape == (120, 3)
-    assert res[0].Phi.shape == (120, 3, 3)
-    assert res[0].K.shape == (120, 3, 2)
+    assert model.n_states_ == 4  # default: two states beyond the p = 2 measured
+    assert res[0].states.shape == (120, 4)
+    assert res[0].Phi.shape == (120, 4, 4)
+    assert res[0].K.shape == (120, 4, 2)
     # The default initial state is zero outputs and the unmeasured rest state.
     np.testing.assert_allclose(
-        model.simulate(X[0], initial_state=np.zeros(3)), model.simulate(X[0])
+        model.simulate(X[0], initial_state=np.zeros(4)), model.simulate(X[0])
     )
-    start = model.simulate(X[0], initial_state=[1.0, -1.0, 0.5])
+    start = model.simulate(X[0], initial_state=[1.0, -1.0, 0.5, 0.0])
     assert not np.allclose(start[:5], model.simulate(X[0])[:5])
     # Measured states in the user's units: the state outputs are the predictions.
     np.testing.assert_allclose(
@@ -376,7 +377,7 @@ def test_bad_calls_after_fit():
     model = ISSMRegressor(n_init=1, max_iter=3, random_state=0).fit(X, y)
     with pytest.raises(ValueError, match="expecting 1 features"):
         model.simulate(np.zeros((10, 2)))
-    with pytest.raises(ValueError, match="n_states = 3"):
+    with pytest.raises(ValueError, match="n_states = 4"):
         model.simulate(X[0], initial_state=[0.0, 1.0])
     with pytest.raises(ValueError, match="fitted with 2"):
         model.predict(X[0], np.zeros((120, 1)))
