@@ -70,6 +70,8 @@ class _Data:
     U: np.ndarray
     starts: np.ndarray
     h: int
+    #: Leading modelled rows left out of a validation score (see ``scored``).
+    skip: int = 0
 
     @property
     def modelled(self) -> np.ndarray:
@@ -80,6 +82,11 @@ class _Data:
                 for a, b in zip(self.starts[:-1], self.starts[1:], strict=True)
             ]
         )
+
+    @property
+    def scored(self) -> np.ndarray:
+        """Modelled rows that count in a validation score."""
+        return self.modelled[self.skip :]
 
     @property
     def lengths(self) -> np.ndarray:
@@ -365,10 +372,11 @@ class _RecurrentRegressorBase(BaseEstimator):
                 f"{'X_val' if X_val is not None else 'y_val'}."
             )
         min_len = self._history_length() + 1
+        skip = 0
         if X_val is not None:
             Xv, yv, _, _ = self._validate_Xy(X_val, y_val, reset=False, y_required=True)
         elif self.early_stopping:
-            Xs, ys, Xv, yv = self._split_validation(Xs, ys, min_len)
+            Xs, ys, Xv, yv, skip = self._split_validation(Xs, ys, min_len)
         else:
             Xv = yv = None
         self._check_lengths(Xs, min_len)
@@ -380,6 +388,8 @@ class _RecurrentRegressorBase(BaseEstimator):
         self._y_mean, self._y_scale = _mean_scale(yc)
         train = self._stack(Xs, ys)
         val = self._stack(Xv, yv) if Xv is not None else None
+        if val is not None:
+            val.skip = skip
         self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train.Y).max())
         self._prepare_structure(train)
 
@@ -434,18 +444,24 @@ class _RecurrentRegressorBase(BaseEstimator):
         """Hook run once the weights are chosen."""
 
     def _split_validation(self, Xs, ys, min_len):
-        """Hold out whole sequences, or the tail block of a single one."""
+        """Hold out whole sequences, or the tail block of a single one.
+
+        Returns ``(X_train, y_train, X_val, y_val, skip)``. A tail block is
+        validated by a free run over its whole record, from rest, of which
+        only the last ``n - skip`` samples count: a run started cold in the
+        middle of the motion would judge the weights by a transient.
+        """
         if len(Xs) >= 3:
             n_val = max(1, round(self.validation_fraction * len(Xs)))
-            return Xs[:-n_val], ys[:-n_val], Xs[-n_val:], ys[-n_val:]
+            return Xs[:-n_val], ys[:-n_val], Xs[-n_val:], ys[-n_val:], 0
         n = len(Xs[-1])
         n_val = round(self.validation_fraction * n)
-        if n_val < min_len or n - n_val < min_len:
-            # Too short to split: validate on the training data itself.
-            return Xs, ys, None, None
+        if n_val < 1 or n - n_val < min_len:
+            # Too short to split: no validation selection.
+            return Xs, ys, None, None, 0
         head = [*Xs[:-1], Xs[-1][:-n_val]]
         yhead = [*ys[:-1], ys[-1][:-n_val]]
-        return head, yhead, [Xs[-1][-n_val:]], [ys[-1][-n_val:]]
+        return head, yhead, [Xs[-1]], [ys[-1]], n - n_val
 
     def _stages(self) -> list[tuple[int, int]]:
         """``(segment length, iterations)`` of each training stage."""
@@ -702,7 +718,7 @@ class _Tracker:
         if self.val is None:
             return
         Yhat, _, diverged, _ = self.est._run(w, self.val, self.seg, False)
-        rows = self.val.modelled
+        rows = self.val.scored
         loss = np.inf
         if not (diverged >= 0).any():
             e = Yhat[rows] - self.val.Y[rows]
@@ -785,9 +801,18 @@ def _solve_minimize(method):
         options = {"maxiter": iters}
         if method == "L-BFGS-B":
             options["gtol"] = tol
+        # Scale the stage's loss to 1 at its start so that ``tol`` is relative:
+        # started at the ARX fit, the loss can be 1e-10 in standardised units.
+        scale = objective.loss(w)
+        scale = scale if np.isfinite(scale) and scale > 0 else 1.0
+
+        def scaled(x):
+            loss, grad = objective.loss_and_grad(x)
+            return loss / scale, grad / scale
+
         try:
             res = minimize(
-                objective.loss_and_grad,
+                scaled,
                 w,
                 jac=True,
                 method=method,

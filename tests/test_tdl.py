@@ -498,3 +498,38 @@ def test_bad_input_messages():
 )
 def test_sklearn_compatible(estimator, check):
     check(estimator)
+
+
+def _free_run_nrmse(model, X, y):
+    return np.sqrt(np.mean((model.simulate(X) - y) ** 2)) / np.std(y)
+
+
+@pytest.mark.parametrize("solver", ["lbfgs", "slsqp"])
+def test_quasi_newton_solvers_keep_iterating_from_the_arx_start(solver):
+    # On the oscillator the ARX start's one-step loss is about 1e-10 in
+    # standardised units: tolerances must be relative to it, or the solvers
+    # stop at once and return the starting point.
+    from sysid_nn import HystereticOscillator
+
+    rec = HystereticOscillator().generate(1, n_samples=600, random_state=3)
+    X, y = rec.excitation[0, :, None], rec.displacement[0]
+    settings = dict(
+        solver=solver, hidden_layer_sizes=(4,), focus="prediction", early_stopping=False
+    )
+    net = _small(max_iter=40, **settings).fit(X, y)
+    start = _small(max_iter=1, **settings).fit(X, y)
+    assert net.n_iter_ >= 20
+    assert net.loss_ < 0.9 * start.loss_
+
+
+def test_tail_block_validation_scores_only_the_held_out_tail():
+    Xs, ys = _records(n=1, length=300)
+    model = _small(validation_fraction=0.2)
+    model.n_outputs_ = 1
+    head, yhead, val, yval, skip = model._split_validation(Xs, [ys[0]], 5)
+    assert len(head[0]) == len(yhead[0]) == 240 and skip == 240
+    assert len(val[0]) == len(yval[0]) == 300
+    # The validation free run covers the whole record from rest.
+    np.testing.assert_array_equal(val[0], Xs[0])
+    fitted = _small(validation_fraction=0.2, max_iter=20).fit(Xs[0], ys[0])
+    assert fitted.best_validation_score_ is not None
