@@ -26,6 +26,7 @@ if TYPE_CHECKING:  # pragma: no cover
     )
 
 __all__ = [
+    "panel_figure",
     "plot_autocorrelation",
     "plot_cross_correlation",
     "plot_error_statistics",
@@ -57,6 +58,46 @@ def _new_panels(ax: Sequence[Axes] | None, n: int, **kwargs: Any) -> list[Axes]:
     import matplotlib.pyplot as plt
 
     return list(np.ravel(plt.subplots(n, 1, **kwargs)[1]))
+
+
+def panel_figure(
+    n_rows: int, *, row_height: float = 2.4, width: float = 7.5
+) -> tuple[Figure, list[Axes]]:
+    """Create a figure of ``n_rows`` stacked panels without pyplot.
+
+    The figure is not registered with pyplot and does not switch the user's
+    backend: it is meant for scripts and reports that save figures to files
+    (``fig.savefig`` renders with Agg whatever the interactive backend is).
+
+    Parameters
+    ----------
+    n_rows : int
+        Number of panels, one above the other.
+    row_height : float, default=2.4
+        Height of each panel in inches.
+    width : float, default=7.5
+        Figure width in inches.
+
+    Returns
+    -------
+    fig : matplotlib.figure.Figure
+        The figure (constrained layout).
+    axes : list of matplotlib.axes.Axes
+        Its panels, top to bottom.
+
+    Examples
+    --------
+    >>> from sysid_nn.plotting import panel_figure
+    >>> fig, axes = panel_figure(3)
+    >>> len(axes), round(float(fig.get_figheight()), 2)
+    (3, 8.4)
+    """
+    if not isinstance(n_rows, (int, np.integer)) or n_rows < 1:
+        raise ValueError(f"n_rows must be a positive integer; got {n_rows!r}.")
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, 1.2 + row_height * n_rows), layout="constrained")
+    return fig, list(np.ravel(fig.subplots(n_rows, 1, squeeze=False)))
 
 
 def _band(ax: Axes, band: float, alpha: float) -> None:

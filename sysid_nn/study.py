@@ -52,6 +52,7 @@ from sklearn.utils import Bunch
 import sysid_nn
 from sysid_nn import HystereticOscillator, ISSMRegressor, TDLRegressor
 from sysid_nn.metrics import error_statistics, fit_percent, nrmse
+from sysid_nn.plotting import panel_figure
 from sysid_nn.residuals import analyze_residuals
 
 __all__ = [
@@ -735,15 +736,6 @@ def summarize(evaluation: Bunch, models: Mapping[str, StudyModel]) -> pd.DataFra
 # ----------------------------------------------------------------------------
 # Figures
 # ----------------------------------------------------------------------------
-def _new_figure(n_rows: int, row_height: float = 2.4) -> tuple[Any, list]:
-    # The object-oriented API: no pyplot figure registry, no global backend
-    # switch; savefig renders with Agg whatever the user's backend is.
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(7.5, 1.2 + row_height * n_rows), layout="constrained")
-    return fig, list(np.ravel(fig.subplots(n_rows, 1, squeeze=False)))
-
-
 def _model_grid(model: StudyModel, n: int, dt: float) -> np.ndarray:
     return np.arange(n) * dt * model.step
 
@@ -751,7 +743,7 @@ def _model_grid(model: StudyModel, n: int, dt: float) -> np.ndarray:
 def _response_figure(models, data, evaluation, mode, title) -> Any:
     from sysid_nn.plotting import plot_response
 
-    fig, axes = _new_figure(len(models))
+    fig, axes = panel_figure(len(models))
     for ax, (name, model) in zip(axes, models.items(), strict=True):
         (_,), (y,) = model.arrays(data.test, [0])
         y0 = y if y.ndim == 1 else y[:, 0]
@@ -769,7 +761,7 @@ def _correlation_figure(models, data, evaluation, kind) -> Any:
         "acf": (plot_autocorrelation, "whiteness"),
         "ccf": (plot_cross_correlation, "cross_correlation"),
     }[kind]
-    fig, axes = _new_figure(len(models))
+    fig, axes = panel_figure(len(models))
     for ax, (name, model) in zip(axes, models.items(), strict=True):
         analysis = evaluation.analyses[name, "prediction"]
         found = getattr(analysis, results).get((0, 0))
@@ -783,7 +775,7 @@ def _correlation_figure(models, data, evaluation, kind) -> Any:
 def _statistics_figure(evaluation, mode, title) -> Any:
     from sysid_nn.plotting import plot_error_statistics
 
-    fig, (ax,) = _new_figure(1, row_height=3.6)
+    fig, (ax,) = panel_figure(1, row_height=3.6)
     plot_error_statistics(evaluation.statistics[mode], title=title, ax=ax)
     return fig
 
@@ -893,7 +885,7 @@ def hysteresis_loops(
 def _hysteresis_figure(loops: Bunch) -> Any:
     from sysid_nn.plotting import plot_hysteresis
 
-    fig, (top, bottom) = _new_figure(2, row_height=3.6)
+    fig, (top, bottom) = panel_figure(2, row_height=3.6)
     x, g, z = loops.truth
     plot_hysteresis(x, g, label="true g", models=loops.force, ax=top)
     top.set_title(
@@ -936,7 +928,7 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
     from sysid_nn.plotting import plot_records
 
     def training() -> Any:
-        _, axes = _new_figure(2)
+        _, axes = panel_figure(2)
         t = np.arange(data.train.excitation.shape[1]) * data.dt
         return plot_records(t, data.train.excitation, data.train.displacement, ax=axes)
 

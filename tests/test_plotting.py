@@ -18,6 +18,7 @@ from matplotlib.lines import Line2D
 
 from sysid_nn.metrics import error_statistics
 from sysid_nn.plotting import (
+    panel_figure,
     plot_autocorrelation,
     plot_cross_correlation,
     plot_error_statistics,
@@ -50,12 +51,28 @@ def legend_texts(ax: Axes) -> list[str]:
 def test_import_sysid_nn_does_not_import_matplotlib():
     code = (
         "import sys, sysid_nn, sysid_nn.residuals, sysid_nn.metrics, "
-        "sysid_nn.plotting; print('matplotlib' in sys.modules)"
+        "sysid_nn.plotting, sysid_nn.study, sysid_nn.cli; "
+        "print('matplotlib' in sys.modules)"
     )
     out = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     )
     assert out.stdout.strip() == "False"
+
+
+def test_panel_figure_stacks_panels_without_pyplot():
+    import matplotlib.pyplot as plt
+
+    before = plt.get_fignums()
+    fig, axes = panel_figure(3, row_height=2.0, width=6.0)
+    assert isinstance(fig, Figure) and len(axes) == 3
+    assert fig.get_size_inches() == pytest.approx((6.0, 7.2))
+    # Panels top to bottom, one column.
+    tops = [ax.get_position().y0 for ax in axes]
+    assert tops == sorted(tops, reverse=True)
+    assert plt.get_fignums() == before  # not registered with pyplot
+    with pytest.raises(ValueError, match="n_rows"):
+        panel_figure(0)
 
 
 def test_plot_records_two_panels():
