@@ -343,6 +343,17 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-iter", type=_positive_int, default=None, metavar="N")
     p.add_argument("--seed", type=_seed, default=0, help="random seed (default: 0)")
     _add_parallel(p)
+    p.add_argument(
+        "--val",
+        action="append",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help=(
+            "validation records for selecting the weights (repeat for several); "
+            "without them the last file, or the tail of a single one, is held out"
+        ),
+    )
     p.add_argument("--save", type=Path, required=True, metavar="FILE")
     p.set_defaults(func=_run_fit)
 
@@ -419,9 +430,16 @@ def _run_fit(args: argparse.Namespace) -> int:
         label if params else args.model.upper(), estimator, inputs, outputs
     )
     X, y = model.arrays(records)
+    validation = {}
+    if args.val:
+        X_val, y_val = model.arrays(
+            _read_records(args.val, [*inputs, *outputs], args.split_by)
+        )
+        validation = {"X_val": X_val, "y_val": y_val}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        estimator.fit(X, y)
+        estimator.fit(X, y, **validation)
+        score = estimator.score(X, y)
     # One line per distinct warning, not Python's two-line source excerpt.
     for message in dict.fromkeys(str(w.message).splitlines()[0] for w in caught):
         print(f"{_PROG}: warning: {message}", file=sys.stderr)
@@ -439,7 +457,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     print(
         f"fitted {model.label} on {len(X)} experiment(s) in "
         f"{estimator.fit_time_:.1f} s; free-run R^2 on them "
-        f"{estimator.score(X, y):.4f}; saved to {args.save}"
+        f"{score:.4f}; saved to {args.save}"
     )
     return 0
 

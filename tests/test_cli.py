@@ -162,6 +162,22 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     assert "## Results at a glance" in (out / "report.md").read_text()
 
 
+def test_fit_with_validation_files(records, tmp_path, capsys):
+    (a, b), _ = records
+    model = tmp_path / "model.joblib"
+    argv = ["fit", str(a), "--val", str(b), "--input", "force"]
+    argv += ["--output", "displacement", "--hidden", "3", *TINY_FIT]
+    assert main([*argv, "--save", str(model)]) == 0
+    assert "on 1 experiment(s)" in capsys.readouterr().out
+    estimator = joblib.load(model).model.estimator
+    # The validation file selected the weights.
+    assert estimator.best_validation_score_ is not None
+    missing = ["fit", str(a), "--val", str(tmp_path / "none.csv"), "--input", "force"]
+    missing += ["--output", "displacement", "--save", str(model)]
+    assert main(missing) == 1
+    assert "none.csv" in _one_error_line(capsys)
+
+
 def test_fit_issm_two_outputs(records, tmp_path, capsys):
     (a, _), _ = records
     model = tmp_path / "issm.joblib"
