@@ -41,6 +41,9 @@ INVENTORY_DIR = DOCS_DIR / "_intersphinx"
 # the source tree so that the documentation also builds from a bare checkout.
 if str(ROOT_DIR) not in sys.path:
     sys.path.insert(0, str(ROOT_DIR))
+# Helpers of this configuration (the gallery's sort key) live beside it.
+if str(DOCS_DIR) not in sys.path:
+    sys.path.insert(0, str(DOCS_DIR))
 
 import sysid_nn
 
@@ -290,30 +293,10 @@ API_PAGES_WRITTEN = _write_api_pages()
 
 # -- sphinx-gallery ------------------------------------------------------------
 
-# Tutorials in reading order, not sphinx-gallery's default (by code length).
-_TUTORIAL_ORDER = [
-    "plot_getting_started.py",
-    "plot_generate_data.py",
-    "plot_tdl_prediction_vs_simulation.py",
-    "plot_issm.py",
-    "plot_residual_analysis.py",
-    "plot_grid_search.py",
-    "plot_monte_carlo.py",
-    "plot_csv_data.py",
-    "plot_dask.py",
-]
-
-
-def _tutorial_key(filename: str) -> tuple[int, str]:
-    # Unlisted scripts go last, alphabetically.
-    if filename in _TUTORIAL_ORDER:
-        return _TUTORIAL_ORDER.index(filename), filename
-    return len(_TUTORIAL_ORDER), filename
-
-
 sphinx_gallery_conf = {
     "examples_dirs": "../examples",
-    "within_subsection_order": _tutorial_key,
+    # Reading order, not sphinx-gallery's default (by code length).
+    "within_subsection_order": "_tutorial_order.TutorialOrder",
     "gallery_dirs": "auto_examples",
     "filename_pattern": r"/plot_",
     "ignore_pattern": r"__init__\.py",

@@ -25,7 +25,7 @@ This example fits :class:`~sysid_nn.ISSMRegressor`, looks at its
 innovations, compares its hidden state with the true :math:`Z`, and plots
 :math:`\\hat{\\boldsymbol{\\Phi}}(t)` and :math:`\\hat{\\mathbf{K}}(t)` from
 :meth:`~sysid_nn.ISSMRegressor.predict_states`. It is trained with one
-restart and ``max_iter=30``; the defaults (``n_init=4``, ``max_iter=150``)
+restart and ``max_iter=60``; the defaults (``n_init=4``, ``max_iter=150``)
 are what to use for real work.
 """
 
@@ -33,8 +33,8 @@ are what to use for real work.
 # Data: displacement and velocity measured, Z hidden
 # --------------------------------------------------
 # ``y`` has two columns, so :math:`p = 2`; with the default
-# ``n_states=None`` the model has ``max(3, p + 1) = 3`` states, the paper's
-# choice.
+# ``n_states=None`` the model has ``p + 2 = 4`` states: the two measured ones
+# and two hidden (the paper used 3; the accuracy benchmark found 4 better).
 import warnings
 
 import matplotlib.pyplot as plt
@@ -65,7 +65,7 @@ X_test, y_test = X[3:], y[3:]
 # (``focus="simulation"``). The paper's network is
 # ``ISSMRegressor(n_states=3, hidden_layer_sizes=(7,), activation="logistic",
 # linear_part=False, focus="prediction")``, trained from random weights.
-model = ISSMRegressor(n_init=1, max_iter=30, random_state=0)
+model = ISSMRegressor(n_init=1, max_iter=60, random_state=0)
 model.fit(X_train, y_train, X_val=X_val, y_val=y_val)
 print(f"{model.n_states_} states, {model.n_outputs_} measured")
 print(f"{model.coefs_.size} weights")
@@ -122,9 +122,9 @@ print(
 
 
 # %%
-# To compare the third state with the true :math:`Z`, map it to :math:`Z`
+# To compare the hidden states with the true :math:`Z`, map them to :math:`Z`
 # by least squares together with the measured states. How much of :math:`Z`
-# the hidden state explains beyond displacement and velocity is the gain in
+# the hidden states explain beyond displacement and velocity is the gain in
 # :math:`R^2` from adding it:
 def r2_of_fit(columns, target):
     design = np.column_stack([*columns, np.ones_like(target)])
@@ -135,20 +135,21 @@ def r2_of_fit(columns, target):
 
 for j, st in enumerate(states):
     z = rec.hysteretic[3 + j]
-    x_hat, v_hat, s_hat = st.states.T
-    r2_xv, _ = r2_of_fit([x_hat, v_hat], z)
-    r2_xvs, _ = r2_of_fit([x_hat, v_hat, s_hat], z)
-    corr = np.corrcoef(s_hat, z)[0, 1]
+    measured, hidden = st.states[:, :2], st.states[:, 2:]
+    r2_xv, _ = r2_of_fit(measured.T, z)
+    r2_all, _ = r2_of_fit(st.states.T, z)
+    corr = max(abs(np.corrcoef(h, z)[0, 1]) for h in hidden.T)
     print(
-        f"test record {j}: R^2 of Z from (X, V) {r2_xv:.3f}, from (X, V, s) "
-        f"{r2_xvs:.3f}; correlation of s with Z {corr:+.3f}"
+        f"test record {j}: R^2 of Z from (X, V) {r2_xv:.3f}, with the hidden "
+        f"states {r2_all:.3f}; largest |correlation| of a hidden state with Z "
+        f"{corr:.3f}"
     )
 
 # %%
 # Displacement and velocity alone leave part of :math:`Z` unexplained; what
-# adding the third state gains is what the network has found out about the
+# adding the hidden states gains is what the network has found out about the
 # hysteresis without ever seeing :math:`Z`. The figure shows :math:`Z` and
-# its reconstruction from the three states on the first test record, in
+# its reconstruction from all states on the first test record, in
 # time and against the displacement (the hysteresis loop).
 z = rec.hysteretic[3]
 _, z_hat = r2_of_fit(states[0].states.T, z)
