@@ -11,7 +11,9 @@ its kernels, the initial parameters, and the kernels themselves.
 
 from __future__ import annotations
 
+import inspect
 import numbers
+import textwrap
 import time
 import warnings
 from dataclasses import dataclass
@@ -36,6 +38,53 @@ _DIVERGENCE_FACTOR = 100.0
 _ONE_STEP_SHARE = 2.0 / 3.0
 _SHOOTING_SHARE = 4.0 / 15.0
 _FREE_RUN = np.iinfo(np.int64).max // 4
+
+
+#: Parameter descriptions shared by the estimators' docstrings.
+_TRAINING_PARAMETERS_DOC = """\
+    solver : {"lm", "lbfgs", "slsqp"}, default="lm"
+        ``"lm"``: Levenberg-Marquardt on the exact recurrent Jacobian
+        (forward sensitivities), with Marquardt's scale-invariant damping;
+        ``"lbfgs"``: L-BFGS-B with the adjoint (backpropagation-through-time)
+        gradient; ``"slsqp"``: sequential quadratic programming as in the
+        paper, with the adjoint gradient.
+    max_iter : int, default=150
+        Iterations of the last training stage; the one-step and each shooting
+        stage get 2/3 and 4/15 of it.
+    tol : float, default=1e-8
+        Relative tolerance of the solver: a stage ends when the loss changes
+        by less than ``tol`` times its value (or the gradient or step become
+        that small).
+    n_init : int, default=4
+        Random restarts; the one with the best validation (or training) loss
+        is kept.
+    early_stopping : bool, default=True
+        Keep, over all accepted steps of all stages, the weights with the best
+        validation loss (free run for the simulation focus, one step for the
+        prediction focus) and stop the last stage after ``n_iter_no_change``
+        steps without improvement.
+    validation_fraction : float, default=0.2
+        Share of the sequences held out when ``early_stopping`` is on and no
+        ``X_val`` is given; with one or two sequences, the share of the last
+        one's tail, scored within a free run over its whole record.
+    n_iter_no_change : int, default=30
+        Patience of early stopping, in accepted steps.
+    random_state : int, RandomState instance or None, default=None
+        Seeds the restarts' initial weights.
+    verbose : bool, default=False
+        Print progress per stage.
+    n_jobs : int, default=None
+        Parallel jobs for the restarts (joblib semantics).
+""".rstrip("\n")
+
+
+def _document_training_parameters(cls):
+    """Insert the shared training parameters into ``cls.__doc__``."""
+    # Work on the cleaned text: Python 3.13 dedents docstrings itself.
+    shared = textwrap.dedent(_TRAINING_PARAMETERS_DOC)
+    doc = inspect.cleandoc(cls.__doc__).replace("%(training_parameters)s", shared)
+    cls.__doc__ = doc + "\n"
+    return cls
 
 
 class DivergenceWarning(UserWarning):

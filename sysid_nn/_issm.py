@@ -16,6 +16,7 @@ from sklearn.utils.validation import check_is_fitted
 from sysid_nn._base import (
     _FREE_RUN,
     _Data,
+    _document_training_parameters,
     _Objective,
     _RecurrentRegressorBase,
     _solve_lm,
@@ -77,6 +78,7 @@ class _Restricted:
         return self.objective.loss(self._full(v))
 
 
+@_document_training_parameters
 class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     """Recurrent network modelling a non-linear innovation state-space model.
 
@@ -170,35 +172,9 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         Segment lengths (samples) of the multiple-shooting stages of the
         simulation focus; at each segment start the measured states restart
         from the measured outputs while the unmeasured ones carry over.
-    solver : {"lm", "lbfgs", "slsqp"}, default="lm"
-        ``"lm"``: Levenberg-Marquardt with the exact Jacobian; ``"lbfgs"``:
-        L-BFGS-B with the adjoint gradient; ``"slsqp"``: sequential quadratic
-        programming as in the paper.
     alpha : float, default=0.0
         L2 penalty on the network weights (not on biases or the linear part).
-    max_iter : int, default=150
-        Iterations of the last training stage; the one-step and each shooting
-        stage get 2/3 and 4/15 of it.
-    tol : float, default=1e-8
-        Tolerance of the solver.
-    n_init : int, default=4
-        Random restarts; the one with the best validation (or training) loss
-        is kept.
-    early_stopping : bool, default=True
-        Keep, over all accepted steps, the weights with the best validation
-        loss and stop the last stage after ``n_iter_no_change`` steps without
-        improvement.
-    validation_fraction : float, default=0.2
-        Share of the sequences (or of the tail of a single sequence) held out
-        when ``early_stopping`` is on and no ``X_val`` is given.
-    n_iter_no_change : int, default=30
-        Patience of early stopping, in accepted steps.
-    random_state : int, RandomState instance or None, default=None
-        Seeds the restarts' initial weights.
-    verbose : bool, default=False
-        Print progress per stage.
-    n_jobs : int, default=None
-        Parallel jobs for the restarts (joblib semantics).
+    %(training_parameters)s
 
     Attributes
     ----------
@@ -270,8 +246,8 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         linear_part=True,
         focus="simulation",
         shooting_segments=(20, 100, 400),
-        solver="lm",
         alpha=0.0,
+        solver="lm",
         max_iter=150,
         tol=1e-8,
         n_init=4,
@@ -289,8 +265,8 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         self.linear_part = linear_part
         self.focus = focus
         self.shooting_segments = shooting_segments
-        self.solver = solver
         self.alpha = alpha
+        self.solver = solver
         self.max_iter = max_iter
         self.tol = tol
         self.n_init = n_init

@@ -9,13 +9,19 @@ import numpy as np
 from sklearn.base import RegressorMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from sysid_nn._base import _FREE_RUN, _Data, _RecurrentRegressorBase
+from sysid_nn._base import (
+    _FREE_RUN,
+    _Data,
+    _document_training_parameters,
+    _RecurrentRegressorBase,
+)
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
 
 __all__ = ["TDLRegressor"]
 
 
+@_document_training_parameters
 class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     """Multilayer perceptron fed back its own outputs through a tapped delay line.
 
@@ -73,37 +79,10 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         Segment lengths (samples) of the multiple-shooting stages of the
         simulation focus; ``()`` goes from the one-step fit straight to the
         free run.
-    solver : {"lm", "lbfgs", "slsqp"}, default="lm"
-        ``"lm"``: trust-region Levenberg-Marquardt least squares
-        (:func:`scipy.optimize.least_squares`) with the exact Jacobian;
-        ``"lbfgs"``: L-BFGS-B with the adjoint gradient; ``"slsqp"``:
-        sequential quadratic programming as in the paper.
     alpha : float, default=0.0
         L2 penalty on the network weights (not on biases or the bypass),
         scaled like scikit-learn's ``MLPRegressor``.
-    max_iter : int, default=150
-        Iterations of the last training stage; the one-step and each shooting
-        stage get 2/3 and 4/15 of it.
-    tol : float, default=1e-8
-        Tolerance of the solver.
-    n_init : int, default=4
-        Random restarts; the one with the best validation (or training) loss
-        is kept.
-    early_stopping : bool, default=True
-        Keep, over all accepted steps, the weights with the best validation
-        free-run loss and stop the last stage after ``n_iter_no_change``
-        steps without improvement.
-    validation_fraction : float, default=0.2
-        Share of the sequences (or of the tail of a single sequence) held out
-        when ``early_stopping`` is on and no ``X_val`` is given.
-    n_iter_no_change : int, default=30
-        Patience of early stopping, in accepted steps.
-    random_state : int, RandomState instance or None, default=None
-        Seeds the restarts' initial weights.
-    verbose : bool, default=False
-        Print progress per stage.
-    n_jobs : int, default=None
-        Parallel jobs for the restarts (joblib semantics).
+    %(training_parameters)s
 
     Attributes
     ----------
@@ -167,8 +146,8 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         lag_representation="differences",
         focus="simulation",
         shooting_segments=(20, 100, 400),
-        solver="lm",
         alpha=0.0,
+        solver="lm",
         max_iter=150,
         tol=1e-8,
         n_init=4,
@@ -188,8 +167,8 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         self.lag_representation = lag_representation
         self.focus = focus
         self.shooting_segments = shooting_segments
-        self.solver = solver
         self.alpha = alpha
+        self.solver = solver
         self.max_iter = max_iter
         self.tol = tol
         self.n_init = n_init
