@@ -321,7 +321,7 @@ def write_report(rows, args, elapsed, out_dir: Path, seeds_main, issm_note) -> N
     lines = [
         "# Accuracy benchmark",
         "",
-        f"Command: `python benchmarks/bench_accuracy.py {' '.join(args.argv)}`".rstrip() + f" "
+        f"Command: `{' '.join(['python benchmarks/bench_accuracy.py', *args.argv])}` "
         f"(run time {elapsed / 60:.1f} min)",
         "",
         *machine_info(),
