@@ -76,13 +76,15 @@ def amplitude_order(pool) -> np.ndarray:
     return np.argsort(np.abs(peaks - np.median(peaks)), kind="stable")
 
 
-def make_split(pool, protocol: str, dt: float, outputs: str = "x", n_test=N_TEST) -> Split:
+def make_split(
+    pool, protocol: str, dt: float, outputs: str = "x", n_test=N_TEST
+) -> Split:
     """Sequences of one protocol at one sampling step.
 
     ``outputs="x"`` gives the displacement (1-D ``y``), ``"xv"`` displacement
     and velocity (``y`` of shape ``(n, 2)``, displacement first).
     """
-    step = int(round(dt / BASE_DT))
+    step = round(dt / BASE_DT)
     if not np.isclose(step * BASE_DT, dt):
         raise ValueError(f"dt must be a multiple of {BASE_DT}; got {dt}.")
     order = amplitude_order(pool)

@@ -53,7 +53,7 @@ import _protocol as P  # noqa: E402
 from sysid_nn import TDLRegressor  # noqa: E402
 
 try:  # the ISSM may not exist yet in this tree
-    from sysid_nn import ISSMRegressor  # noqa: E402
+    from sysid_nn import ISSMRegressor
 except (ImportError, AttributeError):  # pragma: no cover
     ISSMRegressor = None
 
@@ -86,10 +86,52 @@ MODELS = {
     "tdl_paper": ("TDL paper (6/5 lags, 9 logistic, one-step)", "tdl", "x", PAPER_TDL),
     "issm_xv": ("ISSM default, X+V measured (p=2)", "issm", "xv", {}),
     "issm_x": ("ISSM default, X only (p=1)", "issm", "x", {}),
-    "issm_paper": ("ISSM paper (3 states, 7 logistic, one-step, p=2)", "issm", "xv", PAPER_ISSM),
-    "linear": ("Linear (TDL hidden_layer_sizes=())", "tdl", "x", {"hidden_layer_sizes": ()}),
+    "issm_paper": (
+        "ISSM paper (3 states, 7 logistic, one-step, p=2)",
+        "issm",
+        "xv",
+        PAPER_ISSM,
+    ),
+    "linear": (
+        "Linear (TDL hidden_layer_sizes=())",
+        "tdl",
+        "x",
+        {"hidden_layer_sizes": ()},
+    ),
 }
 QUICK_MODELS = ("tdl", "linear")
+
+PROTOCOL_TEXT = """\
+Pool of {n_pool} realisations of `HystereticOscillator().generate(n, n_samples=2000,
+dt=0.01, random_state=seed)` (seed {seed}), ordered by closeness of the peak
+displacement to the pool's median peak. P1 trains on the first record, P5 on the
+first five; the next {n_val} validate (`X_val, y_val`); the test set is the {n_test}
+records after the first {n_reserved} (the same for P1 and P5). dt = 0.03 uses every
+third sample (`x[::3]`). Every estimator has `random_state=0, n_jobs=2` and otherwise
+the parameters named in the row.
+
+Scores are NRMSE (RMS error / std of the measured signal) per test record,
+displacement only:
+
+- free run from zero initial conditions (mean, median, worst; `div` = divergent
+  runs, scored as infinite); ratio = its median / the linear model's median;
+- free run started at t0 = 2 s from measured outputs, scored from t0 (TDL:
+  `initial_outputs` = the measured outputs before t0; ISSM: `initial_state` = the
+  measured outputs at t0 - dt as the first p states, zeros elsewhere). The
+  estimator's history is given the measured excitation before t0: the public
+  `simulate` assumes zero excitation before the start;
+- ISSM only: the same with the unmeasured states started at the one-step
+  predictor's estimate from the measurements before t0
+  (`predict_states(X[:k0], y[:k0])`, "filtered state");
+- the zero-initial free run with both signals zero-phase high-passed above 0.3 Hz
+  (4th-order Butterworth, `filtfilt`): the oscillatory part without the drift;
+- k-step prediction medians (`predict(X, y, horizon=k)`);
+- percentage of test records whose one-step residuals pass the whiteness test
+  and the cross-correlation test (both lag sides), max lag 25, 5 % level.
+
+`fit s` is wall-clock training time and `load` the 1-minute load average at the
+end of the fit (2 cores shared with other work: fit times above a load of 2 are
+inflated)."""
 
 
 def make_estimator(family: str, kwargs: dict, quick: bool):
@@ -120,36 +162,54 @@ def evaluate(name: str, split: P.Split, quick: bool) -> dict:
     row["fit_warnings"] = ";".join(sorted({type(w.message).__name__ for w in caught}))
 
     X, Y, dt = split.X_test, split.y_test, split.dt
-    k0 = int(round(P.T0_MEASURED / dt))
+    k0 = round(P.T0_MEASURED / dt)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sim = est.simulate(X)
-        sim_k0 = [P.simulate_from_measured(est, x, y, k0, p) for x, y in zip(X, Y)]
+        sim_k0 = [
+            P.simulate_from_measured(est, x, y, k0, p)
+            for x, y in zip(X, Y, strict=True)
+        ]
         if family == "issm":
-            sim_kf = [P.simulate_from_measured(est, x, y, k0, p, filtered=True)
-                      for x, y in zip(X, Y)]
+            sim_kf = [
+                P.simulate_from_measured(est, x, y, k0, p, filtered=True)
+                for x, y in zip(X, Y, strict=True)
+            ]
         preds = {k: est.predict(X, Y, horizon=k) for k in P.HORIZONS}
 
-    free = [P.record_nrmse(y, s) for y, s in zip(Y, sim)]
+    free = [P.record_nrmse(y, s) for y, s in zip(Y, sim, strict=True)]
     row["n_divergent"] = int(sum(not np.all(np.isfinite(s)) for s in sim))
     row["n_divergent_k0"] = int(sum(not np.all(np.isfinite(s)) for s in sim_k0))
     for key, vals in (
         ("free", free),
-        ("free_k0", [P.record_nrmse(y[k0:], s) for y, s in zip(Y, sim_k0)]),
+        (
+            "free_k0",
+            [P.record_nrmse(y[k0:], s) for y, s in zip(Y, sim_k0, strict=True)],
+        ),
         *(
-            [("free_kf", [P.record_nrmse(y[k0:], s) for y, s in zip(Y, sim_kf)])]
+            [
+                (
+                    "free_kf",
+                    [P.record_nrmse(y[k0:], s) for y, s in zip(Y, sim_kf, strict=True)],
+                )
+            ]
             if family == "issm"
             else []
         ),
-        ("free_hp", [P.record_nrmse_highpass(y, s, dt) for y, s in zip(Y, sim)]),
+        (
+            "free_hp",
+            [P.record_nrmse_highpass(y, s, dt) for y, s in zip(Y, sim, strict=True)],
+        ),
     ):
         for stat, v in P.summary(vals).items():
             row[f"{key}_{stat}"] = v
     for k, pred in preds.items():
-        s = P.summary([P.record_nrmse(y, yp) for y, yp in zip(Y, pred)])
+        s = P.summary([P.record_nrmse(y, yp) for y, yp in zip(Y, pred, strict=True)])
         row[f"k{k}_median"], row[f"k{k}_mean"] = s["median"], s["mean"]
-    tests = [P.residual_tests(P.first_col(y) - P.first_col(yp), x)
-             for x, y, yp in zip(X, Y, preds[1])]
+    tests = [
+        P.residual_tests(P.first_col(y) - P.first_col(yp), x)
+        for x, y, yp in zip(X, Y, preds[1], strict=True)
+    ]
     row["white_pass"] = float(np.mean([t[0] for t in tests]))
     row["xcorr_pass"] = float(np.mean([t[1] for t in tests]))
     row["n_test"] = len(X)
@@ -193,7 +253,9 @@ def add_ratios(rows: list[dict]) -> None:
     for r in rows:
         groups.setdefault((r["seed"], r["dt"], r["protocol"]), []).append(r)
     for group in groups.values():
-        lin = next((r for r in group if r["model"] == "linear" and "free_median" in r), None)
+        lin = next(
+            (r for r in group if r["model"] == "linear" and "free_median" in r), None
+        )
         for r in group:
             if lin is not None and "free_median" in r:
                 r["ratio"] = r["free_median"] / lin["free_median"]
@@ -204,7 +266,10 @@ def table(rows: list[dict]) -> list[str]:
     lines = [head, "|" + "---|" * (len(COLUMNS) + 1)]
     for r in rows:
         if "error" in r:
-            lines.append(f"| {r['label']} | fit failed: {r['error']} |" + " |" * (len(COLUMNS) - 1))
+            lines.append(
+                f"| {r['label']} | fit failed: {r['error']} |"
+                + " |" * (len(COLUMNS) - 1)
+            )
             continue
         lines.append(f"| {r['label']} | " + " | ".join(f(r) for _, f in COLUMNS) + " |")
     return lines
@@ -212,7 +277,12 @@ def table(rows: list[dict]) -> list[str]:
 
 def find(rows, seed, dt, protocol, model):
     for r in rows:
-        if (r["seed"], r["dt"], r["protocol"], r["model"]) == (seed, dt, protocol, model):
+        if (r["seed"], r["dt"], r["protocol"], r["model"]) == (
+            seed,
+            dt,
+            protocol,
+            model,
+        ):
             return r if "free_median" in r else None
     return None
 
@@ -240,25 +310,37 @@ def targets(rows: list[dict], seed: int) -> list[str]:
         for protocol, limit in limits.items():
             ok, txt = ratio_target(model, protocol, limit, div)
             cond = f"ratio <= {limit}" + (", no divergent simulation" if div else "")
-            out.append(f"- dt = 0.01, {protocol}, {name}: {cond}: {verdict(ok)}" + (f" ({txt})" if txt else ""))
+            out.append(
+                f"- dt = 0.01, {protocol}, {name}: {cond}: {verdict(ok)}"
+                + (f" ({txt})" if txt else "")
+            )
     for protocol in P.PROTOCOLS:
-        a, b = find(rows, seed, 0.01, protocol, "issm_x"), find(rows, seed, 0.01, protocol, "tdl")
+        a, b = (
+            find(rows, seed, 0.01, protocol, "issm_x"),
+            find(rows, seed, 0.01, protocol, "tdl"),
+        )
         if a is None or b is None:
-            out.append(f"- dt = 0.01, {protocol}, ISSM X only at least as good as the TDL: not measured")
+            out.append(
+                f"- dt = 0.01, {protocol}, ISSM X only at least as good as the TDL: "
+                "not measured"
+            )
             continue
         ok = a["free_median"] <= b["free_median"]
         out.append(
-            f"- dt = 0.01, {protocol}, ISSM X only at least as good as the TDL (median free run): "
-            f"{verdict(ok)} ({a['free_median']:.4f} vs {b['free_median']:.4f})"
+            f"- dt = 0.01, {protocol}, ISSM X only at least as good as the TDL "
+            f"(median free run): {verdict(ok)} "
+            f"({a['free_median']:.4f} vs {b['free_median']:.4f})"
         )
     for model in ("tdl", "issm_xv", "issm_x"):
         r = find(rows, seed, 0.03, "P5", model)
         if r is None or "ratio" not in r:
-            out.append(f"- dt = 0.03, P5, {MODELS[model][0]} better than linear: not measured")
+            out.append(
+                f"- dt = 0.03, P5, {MODELS[model][0]} better than linear: not measured"
+            )
             continue
         out.append(
-            f"- dt = 0.03, P5, {MODELS[model][0]} better than linear: {verdict(r['ratio'] < 1)} "
-            f"(ratio {r['ratio']:.3f})"
+            f"- dt = 0.03, P5, {MODELS[model][0]} better than linear: "
+            f"{verdict(r['ratio'] < 1)} (ratio {r['ratio']:.3f})"
         )
     for dt in (0.01, 0.03):
         for protocol in P.PROTOCOLS:
@@ -268,18 +350,26 @@ def targets(rows: list[dict], seed: int) -> list[str]:
                 if r is None or lin is None:
                     continue
                 # "clearly better": at most half the linear model's median error
-                r10, r50 = r["k10_median"] / lin["k10_median"], r["k50_median"] / lin["k50_median"]
+                r10, r50 = (
+                    r["k10_median"] / lin["k10_median"],
+                    r["k50_median"] / lin["k50_median"],
+                )
                 ok = r10 <= 0.5 and r50 <= 0.5
                 out.append(
-                    f"- dt = {dt}, {protocol}, {MODELS[model][0]}: k-step (10, 50) clearly better "
-                    f"than linear (ratio <= 0.5): {verdict(ok)} (ratios {r10:.3f}, {r50:.3f})"
+                    f"- dt = {dt}, {protocol}, {MODELS[model][0]}: k-step (10, 50) "
+                    f"clearly better than linear (ratio <= 0.5): {verdict(ok)} "
+                    f"(ratios {r10:.3f}, {r50:.3f})"
                 )
     r = find(rows, seed, 0.01, "P5", "tdl")
     ok = None if r is None else r["fit_s"] < 60
     out.append(
         "- TDL default fit time, P5, dt = 0.01, under a minute on 2 cores: "
         + verdict(ok)
-        + ("" if r is None else f" ({r['fit_s']:.1f} s, 1-min load average {r['load_avg_1min']:.1f})")
+        + (
+            ""
+            if r is None
+            else f" ({r['fit_s']:.1f} s, 1-min load average {r['load_avg_1min']:.1f})"
+        )
     )
     return out
 
@@ -309,11 +399,13 @@ def machine_info() -> list[str]:
 
     return [
         f"- date: {datetime.datetime.now().isoformat(timespec='seconds')}",
-        f"- python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
-        f"numba {numba.__version__}, scikit-learn {sklearn.__version__}, sysid_nn {sysid_nn.__version__}",
+        f"- python {platform.python_version()}, numpy {np.__version__}, "
+        f"scipy {scipy.__version__}, numba {numba.__version__}, "
+        f"scikit-learn {sklearn.__version__}, sysid_nn {sysid_nn.__version__}",
         f"- {source_version()}",
         f"- {platform.platform()}, {platform.processor() or platform.machine()}, "
-        f"{os.cpu_count()} CPUs (shared with other work: times are noisy, compare ratios within one run)",
+        f"{os.cpu_count()} CPUs (shared with other work: times are noisy, "
+        "compare ratios within one run)",
     ]
 
 
@@ -328,31 +420,13 @@ def write_report(rows, args, elapsed, out_dir: Path, seeds_main, issm_note) -> N
         "",
         "## Protocol",
         "",
-        f"Pool of {P.N_POOL} realisations of `HystereticOscillator().generate(n, n_samples=2000, "
-        f"dt=0.01, random_state=seed)` (seed {seeds_main}), ordered by closeness of the peak "
-        "displacement to the pool's median peak. P1 trains on the first record, P5 on the first "
-        f"five; the next {P.N_VAL} validate (`X_val, y_val`); the test set is the {P.N_TEST} "
-        f"records after the first {P.N_RESERVED} (the same for P1 and P5). dt = 0.03 uses every "
-        "third sample (`x[::3]`). Every estimator has `random_state=0, n_jobs=2` and otherwise the "
-        "parameters named in the row.",
-        "",
-        "Scores are NRMSE (RMS error / std of the measured signal) per test record, "
-        "displacement only: free run from zero initial conditions (mean, median, worst; "
-        "`div` = divergent runs, scored as infinite); free run started at t0 = 2 s from measured "
-        "outputs (TDL: `initial_outputs` = the measured outputs before t0; ISSM: `initial_state` "
-        "= the measured outputs at t0 - dt as the first p states, zeros elsewhere; the "
-        "estimator's history is given the measured excitation before t0, since the public "
-        "`simulate` assumes zero excitation before the start) scored from t0; for the ISSM also "
-        "the same with the unmeasured states started at the one-step predictor's estimate from "
-        "the measurements before t0 (`predict_states(X[:k0], y[:k0])`, 'filtered state'); the "
-        "zero-initial "
-        "free run with both signals zero-phase high-passed above 0.3 Hz (oscillatory part, "
-        "without the drift/permanent set); k-step prediction medians (`predict(X, y, horizon=k)`); "
-        "percentage of test records whose one-step residuals pass the whiteness test and the "
-        "cross-correlation test (both lag sides), max lag 25, 5 % level. Ratio = median free-run "
-        "NRMSE / the linear model's. `fit s` is wall-clock training time and `load` the "
-        "1-minute load average at the end of the fit (2 cores shared with other work: fit times "
-        "above a load of 2 are inflated).",
+        PROTOCOL_TEXT.format(
+            n_pool=P.N_POOL,
+            seed=seeds_main,
+            n_val=P.N_VAL,
+            n_test=P.N_TEST,
+            n_reserved=P.N_RESERVED,
+        ),
         "",
     ]
     if issm_note:
@@ -361,22 +435,30 @@ def write_report(rows, args, elapsed, out_dir: Path, seeds_main, issm_note) -> N
     for seed in seeds:
         for dt in sorted({r["dt"] for r in rows if r["seed"] == seed}):
             for protocol in P.PROTOCOLS:
-                sub = [r for r in rows if (r["seed"], r["dt"], r["protocol"]) == (seed, dt, protocol)]
+                sub = [
+                    r
+                    for r in rows
+                    if (r["seed"], r["dt"], r["protocol"]) == (seed, dt, protocol)
+                ]
                 if not sub:
                     continue
                 tr = sub[0].get("train_idx")
                 lines += [f"## dt = {dt} s, {protocol}, seed {seed}", ""]
-                lines += [f"Training records {tr}, validation {sub[0].get('val_idx')}.", ""]
-                lines += table(sub) + [""]
+                lines += [
+                    f"Training records {tr}, validation {sub[0].get('val_idx')}.",
+                    "",
+                ]
+                lines += [*table(sub), ""]
     main_seed = seeds_main
-    lines += ["## Targets", ""] + targets(rows, main_seed) + [""]
+    lines += ["## Targets", "", *targets(rows, main_seed), ""]
     rob = [r for r in rows if r["seed"] != main_seed and "free_median" in r]
     if rob:
-        lines += ["## Spread over pool seeds (P1, dt = 0.01, median free-run NRMSE / ratio)", ""]
+        lines += [
+            "## Spread over pool seeds (P1, dt = 0.01, median free-run NRMSE / ratio)",
+            "",
+        ]
         for model in ROBUSTNESS_MODELS:
-            vals = [
-                (s, find(rows, s, 0.01, "P1", model)) for s in seeds
-            ]
+            vals = [(s, find(rows, s, 0.01, "P1", model)) for s in seeds]
             txt = ", ".join(
                 f"seed {s}: {r['free_median']:.4f}"
                 + (f" / {r['ratio']:.3f}" if "ratio" in r else "")
@@ -395,7 +477,9 @@ def write_report(rows, args, elapsed, out_dir: Path, seeds_main, issm_note) -> N
         w = csv.DictWriter(fh, fieldnames=keys)
         w.writeheader()
         for r in rows:
-            w.writerow({k: (str(v) if isinstance(v, list) else v) for k, v in r.items()})
+            w.writerow(
+                {k: (str(v) if isinstance(v, list) else v) for k, v in r.items()}
+            )
 
 
 def main(argv: list[str]) -> int:
@@ -416,14 +500,20 @@ def main(argv: list[str]) -> int:
     quick = args.quick
     protocols = (args.protocols or ("P1" if quick else "P1,P5")).split(",")
     dts = [float(d) for d in (args.dt or ("0.01" if quick else "0.01,0.03")).split(",")]
-    models = (args.models or (",".join(QUICK_MODELS) if quick else ",".join(MODELS))).split(",")
+    models = (
+        args.models or (",".join(QUICK_MODELS) if quick else ",".join(MODELS))
+    ).split(",")
     for m in models:
         if m not in MODELS:
             ap.error(f"unknown model {m!r}; choose from {', '.join(MODELS)}")
-    rob_arg = args.robustness_seeds or ("none" if quick else ",".join(map(str, ROBUSTNESS_SEEDS)))
+    rob_arg = args.robustness_seeds or (
+        "none" if quick else ",".join(map(str, ROBUSTNESS_SEEDS))
+    )
     rob_seeds = [] if rob_arg == "none" else [int(s) for s in rob_arg.split(",")]
-    out_dir = Path(args.out) if args.out else (
-        Path(tempfile.gettempdir()) / "sysid_nn_bench_quick" if quick else HERE
+    out_dir = (
+        Path(args.out)
+        if args.out
+        else (Path(tempfile.gettempdir()) / "sysid_nn_bench_quick" if quick else HERE)
     )
     out_dir.mkdir(parents=True, exist_ok=True)
 
@@ -432,7 +522,10 @@ def main(argv: list[str]) -> int:
         dropped = [m for m in models if MODELS[m][1] == "issm"]
         models = [m for m in models if MODELS[m][1] != "issm"]
         if dropped:
-            issm_note = f"ISSMRegressor is not available in this tree: {', '.join(dropped)} not run."
+            issm_note = (
+                "ISSMRegressor is not available in this tree: "
+                f"{', '.join(dropped)} not run."
+            )
             print(issm_note, flush=True)
 
     start = time.perf_counter()
@@ -457,18 +550,27 @@ def main(argv: list[str]) -> int:
             f"k10 {row['k10_median']:.4f}, k50 {row['k50_median']:.4f}"
         )
         print(
-            f"[{time.perf_counter() - start:6.0f} s] seed {seed} dt {dt} {protocol} {model}: "
-            f"{status} ({time.perf_counter() - t0:.0f} s)",
+            f"[{time.perf_counter() - start:6.0f} s] seed {seed} dt {dt} {protocol} "
+            f"{model}: {status} ({time.perf_counter() - t0:.0f} s)",
             flush=True,
         )
         add_ratios(rows)
-        write_report(rows, args, time.perf_counter() - start, out_dir, args.seed, issm_note)
+        write_report(
+            rows, args, time.perf_counter() - start, out_dir, args.seed, issm_note
+        )
     elapsed = time.perf_counter() - start
     write_report(rows, args, elapsed, out_dir, args.seed, issm_note)
     print((out_dir / "results.md").read_text())
-    print(f"wrote {out_dir / 'results.md'} and results_accuracy.csv in {elapsed / 60:.1f} min")
+    print(
+        f"wrote {out_dir / 'results.md'} and results_accuracy.csv "
+        f"in {elapsed / 60:.1f} min"
+    )
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main(sys.argv[1:]))
+    # Run by ``benchmarks/run.py`` (runpy), sys.argv is the runner's: use defaults.
+    direct = Path(sys.argv[0]).name == Path(__file__).name
+    status = main(sys.argv[1:] if direct else [])
+    if status:
+        raise SystemExit(status)
