@@ -543,6 +543,9 @@ class _RecurrentRegressorBase(BaseEstimator):
         for i_stage, (seg, iters) in enumerate(stages):
             last = i_stage == len(stages) - 1
             tracker.patience = self.n_iter_no_change if last else None
+            # Patience counts the last stage's own steps: steps of earlier
+            # stages without improvement must not end it before it starts.
+            tracker.since_best = 0
             objective = _Objective(self, train, seg, mask, n_res)
             if not np.isfinite(objective.loss(w)):
                 continue  # the stage diverges from here on: skip it

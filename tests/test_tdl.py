@@ -533,3 +533,35 @@ def test_tail_block_validation_scores_only_the_held_out_tail():
     np.testing.assert_array_equal(val[0], Xs[0])
     fitted = _small(validation_fraction=0.2, max_iter=20).fit(Xs[0], ys[0])
     assert fitted.best_validation_score_ is not None
+
+
+def test_last_stage_gets_its_own_patience():
+    # Steps of the earlier stages without a better validation loss must not
+    # count against the free-run stage's patience.
+    Xs, ys = _records(n=4, length=300, seed=5)
+    model = _small(hidden_layer_sizes=(4,), max_iter=60, n_iter_no_change=10)
+    stages = []
+    original = model._fit_one_serial
+
+    def spy(train, val, seed, k):
+        from sysid_nn import _base
+
+        solve = _base._SOLVERS["lm"]
+
+        def counting(objective, w, iters, tol, tracker):
+            out = solve(objective, w, iters, tol, tracker)
+            stages.append((objective.seg, out[1], tracker.stopped))
+            return out
+
+        _base._SOLVERS["lm"] = counting
+        try:
+            return original(train, val, seed, k)
+        finally:
+            _base._SOLVERS["lm"] = solve
+
+    model._fit_one_serial = spy
+    model.fit(Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
+    seg, n_eval, stopped = stages[-1]
+    assert seg == _FREE_RUN
+    # Either it converged or it ran at least its patience before stopping.
+    assert n_eval >= model.n_iter_no_change or not stopped
