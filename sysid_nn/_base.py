@@ -363,10 +363,22 @@ class _RecurrentRegressorBase(BaseEstimator):
                 )
 
     # ------------------------------------------------------------ scaling
-    def _stack(self, Xs, ys, initial=None) -> _Data:
-        """Standardise and stack sequences, with their history rows."""
+    def _stack(self, Xs, ys, initial=None, initial_inputs=None) -> _Data:
+        """Standardise and stack sequences, with their history rows.
+
+        ``initial_inputs`` (validated by :meth:`_check_initial_inputs`)
+        replaces the zero excitation of the last history rows.
+        """
         h = self._history_length()
         Yh, Uh = self._history(len(Xs), initial)
+        if initial_inputs is not None:
+            Uh = [u.copy() for u in Uh]
+            for s, past in enumerate(initial_inputs):
+                k = min(len(past), h)
+                if k:
+                    Uh[s][h - k :] = (
+                        past[len(past) - k :] - self._x_mean
+                    ) / self._x_scale
         n_out = self.n_outputs_
         rows = [h + len(Xi) for Xi in Xs]
         starts = np.concatenate([[0], np.cumsum(rows)]).astype(np.int64)
@@ -577,12 +589,13 @@ class _RecurrentRegressorBase(BaseEstimator):
         )
 
     # ----------------------------------------------------------- predicting
-    def _simulate(self, X, initial, initial_name: str):
+    def _simulate(self, X, initial, initial_name: str, initial_inputs=None):
         check_is_fitted(self, "coefs_")
         Xs, _, as_list, _ = self._validate_Xy(X, reset=False, y_required=False)
         self._check_lengths(Xs, 1)
         initial = self._check_initial(initial, len(Xs), as_list, initial_name)
-        data = self._stack(Xs, None, initial)
+        past = self._check_initial_inputs(initial_inputs, len(Xs), as_list)
+        data = self._stack(Xs, None, initial, past)
         Yhat, _, diverged, _ = self._run(self.coefs_, data, _FREE_RUN, False)
         self._warn_divergence(diverged, as_list)
         return self._unstack(Yhat, data, as_list, self._y_1d)
@@ -658,6 +671,38 @@ default=None
 
     def _check_initial(self, initial, n_seq: int, as_list: bool, name: str):
         return initial  # subclasses validate their own initial conditions
+
+    def _check_initial_inputs(self, initial_inputs, n_seq: int, as_list: bool):
+        """Validate the excitation before the first sample of each sequence.
+
+        One 2-D array ``(k, n_inputs)`` per sequence (1-D allowed for one
+        input), oldest first; only the last rows the lags reach are used,
+        and missing older rows are zero excitation.
+        """
+        if initial_inputs is None:
+            return None
+        pasts = list(initial_inputs) if as_list else [initial_inputs]
+        if len(pasts) != n_seq:
+            raise ValueError(
+                f"initial_inputs must hold one array per sequence; got {len(pasts)} "
+                f"for {n_seq} sequences."
+            )
+        out = []
+        for i, past in enumerate(pasts):
+            a = np.asarray(past, dtype=np.float64)
+            if a.ndim == 1 and self.n_features_in_ == 1:
+                a = a[:, None]
+            where = f"initial_inputs[{i}]" if as_list else "initial_inputs"
+            if a.ndim != 2 or a.shape[1] != self.n_features_in_:
+                raise ValueError(
+                    f"{where} must have shape (n_past_samples, {self.n_features_in_}) "
+                    f"(the excitation before the first sample, oldest first); got "
+                    f"shape {a.shape}."
+                )
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"{where} contains NaN or inf; pass finite values.")
+            out.append(a)
+        return out
 
     def _warn_divergence(self, diverged: np.ndarray, as_list: bool) -> None:
         for s, t in enumerate(diverged):

@@ -285,7 +285,7 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     score = _RecurrentRegressorBase.score
 
     # -------------------------------------------------------------- public
-    def simulate(self, X, *, initial_state=None):
+    def simulate(self, X, *, initial_state=None, initial_inputs=None):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
         The innovations are zero throughout (``E = 0``).
@@ -300,6 +300,11 @@ default=None
             user's units, then the unmeasured states in the internal
             coordinates (as returned by :meth:`predict_states`). Default:
             zero outputs and the unmeasured states at rest, as in the paper.
+        initial_inputs : array-like of shape (n_past, n_inputs), or list of \
+such, default=None
+            Measured excitation just before the first sample, oldest first
+            (1-D for one input). Default: zero excitation before the start.
+            Only the last ``input_delay`` rows are used.
 
         Returns
         -------
@@ -307,7 +312,7 @@ default=None
             Simulated response; NaN from a sample where the run diverged (a
             :class:`~sysid_nn.DivergenceWarning` says where).
         """
-        data, X0, as_list = self._prepare_call(X, None, initial_state)
+        data, X0, as_list = self._prepare_call(X, None, initial_state, initial_inputs)
         Yhat, _, diverged, _ = self._run_from(self.coefs_, data, _FREE_RUN, False, X0)
         self._warn_divergence(diverged, as_list)
         return self._unstack(Yhat, data, as_list, self._y_1d)
@@ -435,13 +440,14 @@ default=None
             X0[:, self.n_outputs_ :] = np.array([s[self.n_outputs_ :] for s in initial])
         return X0
 
-    def _prepare_call(self, X, y, initial):
+    def _prepare_call(self, X, y, initial, initial_inputs=None):
         """Validate and stack a prediction call; returns ``(data, X0, as_list)``."""
         check_is_fitted(self, "coefs_")
         Xs, ys, as_list, _ = self._validate_Xy(X, y, reset=False, y_required=False)
         self._check_lengths(Xs, 1)
         initial = self._check_initial(initial, len(Xs), as_list, "initial_state")
-        data = self._stack(Xs, ys, initial)
+        past = self._check_initial_inputs(initial_inputs, len(Xs), as_list)
+        data = self._stack(Xs, ys, initial, past)
         return data, self._initial_states(data, initial), as_list
 
     # ------------------------------------------------ linear starting point

@@ -186,7 +186,7 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     score = _RecurrentRegressorBase.score
 
     # -------------------------------------------------------------- public
-    def simulate(self, X, *, initial_outputs=None):
+    def simulate(self, X, *, initial_outputs=None, initial_inputs=None):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
         Parameters
@@ -196,8 +196,14 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         initial_outputs : array-like of shape (output_lags, n_outputs) or \
 (output_lags,), or list of such, default=None
             Measured outputs just before the first sample, oldest first.
-            Default: zero initial conditions (and zero excitation before the
-            start), as in the paper.
+            Default: zero initial conditions, as in the paper.
+        initial_inputs : array-like of shape (n_past, n_inputs), or list of \
+such, default=None
+            Measured excitation just before the first sample, oldest first
+            (1-D for one input). Default: zero excitation before the start.
+            Give it with ``initial_outputs`` to continue a record from the
+            middle of the motion; only the last ``input_delay + input_lags -
+            1`` rows are used.
 
         Returns
         -------
@@ -216,7 +222,7 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         >>> model.simulate(u).shape
         (200,)
         """
-        return self._simulate(X, initial_outputs, "initial_outputs")
+        return self._simulate(X, initial_outputs, "initial_outputs", initial_inputs)
 
     # ---------------------------------------------------------- structure
     def _history_length(self) -> int:

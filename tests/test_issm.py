@@ -381,3 +381,15 @@ def test_bad_calls_after_fit():
         model.simulate(X[0], initial_state=[0.0, 1.0])
     with pytest.raises(ValueError, match="fitted with 2"):
         model.predict(X[0], np.zeros((120, 1)))
+
+
+def test_simulation_continues_from_its_own_state_and_past_excitation():
+    X, y = _sequences(2)
+    model = ISSMRegressor(n_init=1, max_iter=5, random_state=0).fit(X, y)
+    full = model.simulate(X[0])
+    states = model.predict_states(X[0]).states
+    k0 = 60
+    resumed = model.simulate(
+        X[0][k0:], initial_state=states[k0 - 1], initial_inputs=X[0][:k0]
+    )
+    np.testing.assert_allclose(resumed, full[k0:], rtol=1e-9, atol=1e-12)

@@ -565,3 +565,23 @@ def test_last_stage_gets_its_own_patience():
     assert seg == _FREE_RUN
     # Either it converged or it ran at least its patience before stopping.
     assert n_eval >= model.n_iter_no_change or not stopped
+
+
+def test_simulation_continues_from_measured_history():
+    # A free run restarted at k0 from its own outputs and the excitation
+    # before k0 continues exactly where the uninterrupted run was.
+    Xs, ys = _records()
+    model = _small(output_lags=3, input_lags=3).fit(Xs, ys)
+    full = model.simulate(Xs[0])
+    k0 = 120
+    resumed = model.simulate(
+        Xs[0][k0:], initial_outputs=full[k0 - 3 : k0], initial_inputs=Xs[0][:k0]
+    )
+    np.testing.assert_allclose(resumed, full[k0:], rtol=1e-10, atol=1e-12)
+    # Without the past excitation the start differs (zero excitation before).
+    cold = model.simulate(Xs[0][k0:], initial_outputs=full[k0 - 3 : k0])
+    assert not np.allclose(cold[:3], full[k0 : k0 + 3])
+    with pytest.raises(ValueError, match=r"initial_inputs must have shape \(n_past"):
+        model.simulate(Xs[0], initial_inputs=np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="one array per sequence"):
+        model.simulate(Xs[:2], initial_inputs=[np.zeros(3)])
