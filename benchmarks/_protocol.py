@@ -159,20 +159,16 @@ def simulate_from_measured(model, X, y, k0: int, p: int, filtered: bool = False)
 
     TDL: ``initial_outputs`` = the measured outputs ``y[k0 - output_lags:k0]``;
     ISSM: ``initial_state`` = the measured outputs at ``k0 - 1`` as the first
-    ``p`` states, zeros (rest) for the unmeasured ones. The public
-    ``simulate`` assumes zero excitation before the first sample; here the
-    estimator's history rows are given the measured excitation before ``k0``
-    instead (the excitation is known there), so that the only difference from
-    the measured trajectory is the unmeasured state. Returns the simulated
-    outputs for samples ``k0..end``.
+    ``p`` states, zeros (rest) for the unmeasured ones. Both are given the
+    measured excitation before ``k0`` (``initial_inputs``), so that the only
+    difference from the measured trajectory is the unmeasured state. Returns
+    the simulated outputs for samples ``k0..end``.
 
     ``filtered=True`` (ISSM only): the unmeasured states start at the one-step
     predictor's (extended Kalman filter's) estimate at ``k0 - 1`` from the
     measurements before ``k0`` (``predict_states(X[:k0], y[:k0])``) instead
     of zero.
     """
-    cls = type(model)
-    hist_x = X[:k0]
     if hasattr(model, "output_lags"):
         kwargs = {"initial_outputs": y[k0 - model.output_lags : k0]}
     else:
@@ -181,18 +177,7 @@ def simulate_from_measured(model, X, y, k0: int, p: int, filtered: bool = False)
         if filtered:
             rest = model.predict_states(X[:k0], y[:k0]).states[-1, p:]
         kwargs = {"initial_state": np.r_[y0, rest]}
-
-    def history(n_seq, initial):
-        Yh, Uh = cls._history(model, n_seq, initial)
-        h = Uh[0].shape[0]
-        u = (hist_x[k0 - h : k0] - model._x_mean) / model._x_scale
-        return Yh, [u.copy() for _ in range(n_seq)]
-
-    model._history = history  # instance attribute shadows the method
-    try:
-        return model.simulate(X[k0:], **kwargs)
-    finally:
-        del model._history
+    return model.simulate(X[k0:], initial_inputs=X[:k0], **kwargs)
 
 
 def residual_tests(e: np.ndarray, x: np.ndarray) -> tuple[bool, bool]:

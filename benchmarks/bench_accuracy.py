@@ -117,9 +117,8 @@ displacement only:
   runs, scored as infinite); ratio = its median / the linear model's median;
 - free run started at t0 = 2 s from measured outputs, scored from t0 (TDL:
   `initial_outputs` = the measured outputs before t0; ISSM: `initial_state` = the
-  measured outputs at t0 - dt as the first p states, zeros elsewhere). The
-  estimator's history is given the measured excitation before t0: the public
-  `simulate` assumes zero excitation before the start;
+  measured outputs at t0 - dt as the first p states, zeros elsewhere), with the
+  measured excitation before t0 (`initial_inputs`);
 - ISSM only: the same with the unmeasured states started at the one-step
   predictor's estimate from the measurements before t0
   (`predict_states(X[:k0], y[:k0])`, "filtered state");
