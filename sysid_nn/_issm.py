@@ -31,6 +31,9 @@ _ARX_LAGS = 3
 #: Solver iterations spent refitting the innovation weights after a
 #: simulation-focused fit.
 _INNOVATION_REFIT_ITERS = 40
+#: Factors tried on the innovation weights, largest first, until the one-step
+#: predictor is stable (0 makes it the free run, stable with the simulator).
+_INNOVATION_SHRINKS = (1.0, 0.5, 0.25, 0.125, 0.0625, 0.0)
 
 
 class UnstablePredictorWarning(UserWarning):
@@ -692,11 +695,7 @@ default=None
         n_res = len(train.modelled) * self.n_outputs_
         objective = _Objective(self, train, 1, self._penalty_mask(), n_res)
         idx = self._innovation_index()
-        # Zero innovation weights make the predictor the free run itself:
-        # the last resort, stable whenever the simulation is.
-        silent = w.copy()
-        silent[idx] = 0.0
-        candidates = [self._substitution_gain(w), w, silent]
+        candidates = [self._substitution_gain(w), w]
         start = min(candidates, key=objective.loss)
         if np.isfinite(objective.loss(start)):
             sub = _Restricted(objective, start, idx)
@@ -706,13 +705,21 @@ default=None
             refit = start.copy()
             refit[idx] = v
             candidates.insert(0, refit)
-        # Selection keeps the one-step predictor stable: the lowest one-step
-        # loss among the candidates whose innovation form is stable (the refit
-        # alone can leave it unstable).
-        for candidate in sorted(candidates, key=objective.loss):
-            if self._predictor_radius(candidate, train) < 1.0:
-                return candidate
-        return candidates[0]
+        # Selection keeps the one-step predictor stable: each candidate's
+        # innovation weights are shrunk towards zero (where the predictor is
+        # the free run) until its innovation form is stable, and the lowest
+        # one-step loss among the stable ones wins. The refit alone can leave
+        # it unstable; dropping the innovations altogether would leave the
+        # one-step predictor no better than the free run.
+        stable = []
+        for candidate in candidates:
+            for shrink in _INNOVATION_SHRINKS:
+                shrunk = candidate.copy()
+                shrunk[idx] *= shrink
+                if self._predictor_radius(shrunk, train) < 1.0:
+                    stable.append(shrunk)
+                    break
+        return min(stable, key=objective.loss) if stable else candidates[0]
 
     def _predictor_radius(self, w: np.ndarray, data: _Data) -> float:
         """Spectral radius of the mean ``Phi(t) - K(t) H`` of the one-step predictor."""

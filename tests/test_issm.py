@@ -220,6 +220,8 @@ def test_oscillator_displacement_and_velocity_measured():
             ),
         }
         assert model.predictor_spectral_radius_ < 1.0
+        # Stable, yet still a filter: the innovations are fed back.
+        assert np.any(model.coefs_[model._innovation_index()] != 0.0)
     lin, net = scores["linear"], scores["network"]
     # Free run and 20-step prediction: an order of magnitude better.
     assert net["sim"] < 0.1 * lin["sim"], scores
