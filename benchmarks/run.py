@@ -37,7 +37,12 @@ def main(argv: list[str]) -> int:
     for script in scripts:
         print(f"=== {script.name}", flush=True)
         start = time.perf_counter()
-        runpy.run_path(str(script), run_name="__main__")
+        # Each script parses its own command line: give it a clean one.
+        saved, sys.argv = sys.argv, [str(script)]
+        try:
+            runpy.run_path(str(script), run_name="__main__")
+        finally:
+            sys.argv = saved
         print(
             f"=== {script.name} done in {time.perf_counter() - start:.1f} s\n",
             flush=True,
