@@ -672,6 +672,17 @@ default=None
     def _check_initial(self, initial, n_seq: int, as_list: bool, name: str):
         return initial  # subclasses validate their own initial conditions
 
+    @staticmethod
+    def _per_sequence(values, n_seq: int, as_list: bool, name: str) -> list:
+        """``values`` as a list with one entry per sequence, or a clear error."""
+        items = list(values) if as_list else [values]
+        if len(items) != n_seq:
+            raise ValueError(
+                f"{name} must hold one array per sequence; got {len(items)} for "
+                f"{n_seq} sequences."
+            )
+        return items
+
     def _check_initial_inputs(self, initial_inputs, n_seq: int, as_list: bool):
         """Validate the excitation before the first sample of each sequence.
 
@@ -681,12 +692,7 @@ default=None
         """
         if initial_inputs is None:
             return None
-        pasts = list(initial_inputs) if as_list else [initial_inputs]
-        if len(pasts) != n_seq:
-            raise ValueError(
-                f"initial_inputs must hold one array per sequence; got {len(pasts)} "
-                f"for {n_seq} sequences."
-            )
+        pasts = self._per_sequence(initial_inputs, n_seq, as_list, "initial_inputs")
         out = []
         for i, past in enumerate(pasts):
             a = np.asarray(past, dtype=np.float64)

@@ -416,12 +416,7 @@ default=None
     def _check_initial(self, initial, n_seq, as_list, name):
         if initial is None:
             return None
-        inits = list(initial) if as_list else [initial]
-        if len(inits) != n_seq:
-            raise ValueError(
-                f"{name} must hold one state per sequence; got {len(inits)} for "
-                f"{n_seq} sequences."
-            )
+        inits = self._per_sequence(initial, n_seq, as_list, name)
         out = []
         for i, init in enumerate(inits):
             a = np.asarray(init, dtype=np.float64).ravel()

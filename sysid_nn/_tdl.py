@@ -253,12 +253,7 @@ such, default=None
     def _check_initial(self, initial, n_seq, as_list, name):
         if initial is None:
             return None
-        inits = list(initial) if as_list else [initial]
-        if len(inits) != n_seq:
-            raise ValueError(
-                f"{name} must hold one array per sequence; got {len(inits)} for "
-                f"{n_seq} sequences."
-            )
+        inits = self._per_sequence(initial, n_seq, as_list, name)
         shape = (self.output_lags, self.n_outputs_)
         out = []
         for i, init in enumerate(inits):
