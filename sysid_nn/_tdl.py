@@ -340,6 +340,14 @@ such, default=None
                 mask[ws] = True
         return mask
 
+    def _network(self) -> tuple:
+        """The fixed arguments of the kernels: layer sizes, activation,
+        bypass flag and lag transform."""
+        return self._sizes_, self._act, self._bypass(), self._S
+
+    def _lags(self) -> tuple[int, int, int]:
+        return self.output_lags, self.input_lags, self.input_delay
+
     def _run(self, w, data, seg_len, want_jac):
         n_rows = data.Y.shape[0]
         n_mod = len(data.modelled) * self.n_outputs_
@@ -348,67 +356,21 @@ such, default=None
         Z = np.empty((n_rows, self._S.shape[0]))
         A = np.empty((n_rows, max(1, n_hidden(self._sizes_))))
         diverged = np.empty(len(data.starts) - 1, dtype=np.int64)
-        tdl_run(
-            w,
-            self._sizes_,
-            self._act,
-            self._bypass(),
-            self._S,
-            data.Y,
-            data.U,
-            data.starts,
-            data.h,
-            self.output_lags,
-            self.input_lags,
-            self.input_delay,
-            min(seg_len, _FREE_RUN),
-            self._bound,
-            want_jac,
-            Yhat,
-            J,
-            Z,
-            A,
-            diverged,
-        )
+        net, lags = self._network(), self._lags()
+        tdl_run(w, *net, data.Y, data.U, data.starts, data.h, *lags,
+                min(seg_len, _FREE_RUN), self._bound, want_jac,
+                Yhat, J, Z, A, diverged)  # fmt: skip
         return Yhat, (J if want_jac else None), diverged, (Yhat, Z, A)
 
     def _gradient(self, w, data, seg_len, state):
         Yhat, Z, A = state
         grad = np.zeros(len(w))
-        tdl_gradient(
-            w,
-            self._sizes_,
-            self._act,
-            self._bypass(),
-            self._S,
-            data.Y,
-            data.starts,
-            data.h,
-            self.output_lags,
-            seg_len,
-            Yhat,
-            Z,
-            A,
-            grad,
-        )
+        tdl_gradient(w, *self._network(), data.Y, data.starts, data.h,
+                     self.output_lags, seg_len, Yhat, Z, A, grad)  # fmt: skip
         return grad
 
     def _run_horizon(self, w, data, horizon):
         Yhat = np.empty_like(data.Y)
-        tdl_predict_horizon(
-            w,
-            self._sizes_,
-            self._act,
-            self._bypass(),
-            self._S,
-            data.Y,
-            data.U,
-            data.starts,
-            data.h,
-            self.output_lags,
-            self.input_lags,
-            self.input_delay,
-            horizon,
-            Yhat,
-        )
+        tdl_predict_horizon(w, *self._network(), data.Y, data.U, data.starts,
+                            data.h, *self._lags(), horizon, Yhat)  # fmt: skip
         return Yhat
