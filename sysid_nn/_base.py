@@ -17,6 +17,7 @@ import textwrap
 import time
 import warnings
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 from joblib import Parallel, delayed
@@ -633,6 +634,7 @@ default=None
         self._check_lengths(Xs, 1)
         data = self._stack(Xs, ys)
         Yhat = self._run_horizon(self.coefs_, data, int(horizon))
+        self._mark_out_of_range(Yhat, data, as_list, f"{horizon}-step prediction")
         return self._unstack(Yhat, data, as_list, y_1d)
 
     def score(self, X, y, sample_weight=None):
@@ -710,17 +712,38 @@ default=None
             out.append(a)
         return out
 
-    def _warn_divergence(self, diverged: np.ndarray, as_list: bool) -> None:
+    def _warn_divergence(
+        self,
+        diverged: np.ndarray,
+        as_list: bool,
+        what: str = "free run",
+        stacklevel: int = 4,
+    ) -> None:
         for s, t in enumerate(diverged):
             if t >= 0:
                 where = f"sequence {s}, " if as_list else ""
                 warnings.warn(
-                    f"The free run of {type(self).__name__} diverged at {where}sample "
+                    f"The {what} of {type(self).__name__} diverged at {where}sample "
                     f"{t}: its output left {_DIVERGENCE_FACTOR:g} times the training "
                     "range. Values from there on are NaN.",
                     DivergenceWarning,
-                    stacklevel=3,
+                    stacklevel=stacklevel,
                 )
+
+    def _mark_out_of_range(self, Yhat, data: _Data, as_list: bool, what: str):
+        """NaN from the first value beyond the divergence bound, with a warning.
+
+        The predictors with measured outputs have no guard inside their
+        kernels; nothing out of range may reach the user silently.
+        """
+        diverged = np.full(len(data.starts) - 1, -1, dtype=np.int64)
+        for s, (a, b) in enumerate(pairwise(data.starts)):
+            block = Yhat[a + data.h : b]
+            bad = np.flatnonzero(~np.all(np.abs(block) <= self._bound, axis=1))
+            if bad.size:
+                diverged[s] = bad[0]
+                block[bad[0] :] = np.nan
+        self._warn_divergence(diverged, as_list, what)
 
 
 def _mean_scale(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -317,7 +317,7 @@ such, default=None
         """
         data, X0, as_list = self._prepare_call(X, None, initial_state, initial_inputs)
         Yhat, _, diverged, _ = self._run_from(self.coefs_, data, _FREE_RUN, False, X0)
-        self._warn_divergence(diverged, as_list)
+        self._warn_divergence(diverged, as_list, stacklevel=3)
         return self._unstack(Yhat, data, as_list, self._y_1d)
 
     def predict_states(self, X, y=None, *, initial_state=None) -> Bunch | list[Bunch]:
@@ -352,7 +352,7 @@ default=None
         data, X0, as_list = self._prepare_call(X, y, initial_state)
         seg = 1 if y is not None else _FREE_RUN
         _, _, diverged, state = self._run_from(self.coefs_, data, seg, False, X0, True)
-        self._warn_divergence(diverged, as_list)
+        self._warn_divergence(diverged, as_list, stacklevel=3)
         Xs, D = state[0], state[3]
         n, p, m = self.n_states_, self.n_outputs_, self.n_features_in_
         scale = np.ones(n)

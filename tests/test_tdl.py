@@ -443,6 +443,11 @@ def test_divergent_free_run_returns_nan_and_warns():
     assert np.all(np.isnan(sim[first:])) and np.all(np.isfinite(sim[:first]))
     with pytest.warns(DivergenceWarning):
         assert model.score(Xs[0], ys[0]) == -np.inf
+    # The k-step predictor with measured outputs is guarded the same way.
+    with pytest.warns(DivergenceWarning, match="50-step prediction .* diverged"):
+        pred = model.predict(Xs[0], ys[0], horizon=50)
+    first = np.flatnonzero(np.isnan(pred))[0]
+    assert np.all(np.isnan(pred[first:])) and np.all(np.isfinite(pred[:first]))
 
 
 def test_early_stopping_uses_held_out_data():
