@@ -51,6 +51,7 @@ sys.path.insert(0, str(HERE))
 import _protocol as P  # noqa: E402
 
 from sysid_nn import TDLRegressor  # noqa: E402
+from sysid_nn.study import PAPER_ISSM, PAPER_TDL  # noqa: E402
 
 try:  # the ISSM may not exist yet in this tree
     from sysid_nn import ISSMRegressor
@@ -62,23 +63,6 @@ ROBUSTNESS_SEEDS = (2025, 2026)
 ROBUSTNESS_MODELS = ("tdl", "issm_xv", "linear")
 N_JOBS = 2
 RANDOM_STATE = 0
-
-PAPER_TDL = dict(
-    output_lags=6,
-    input_lags=5,
-    hidden_layer_sizes=(9,),
-    activation="logistic",
-    linear_bypass=False,
-    lag_representation="delays",
-    focus="prediction",
-)
-PAPER_ISSM = dict(
-    n_states=3,
-    hidden_layer_sizes=(7,),
-    focus="prediction",
-    linear_part=False,
-    activation="logistic",
-)
 
 # name -> (label, estimator family, measured outputs, constructor kwargs)
 MODELS = {

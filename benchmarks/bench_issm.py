@@ -26,16 +26,9 @@ import numpy as np
 
 from sysid_nn import HystereticOscillator, ISSMRegressor
 from sysid_nn._base import _FREE_RUN
+from sysid_nn.study import PAPER_ISSM
 
 HERE = Path(__file__).resolve().parent
-
-PAPER = dict(
-    n_states=3,
-    hidden_layer_sizes=(7,),
-    focus="prediction",
-    linear_part=False,
-    activation="logistic",
-)
 
 
 def _best_time(fn) -> float:
@@ -51,7 +44,7 @@ def main() -> None:
     ]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = ISSMRegressor(**PAPER, n_init=1, max_iter=2, random_state=0)
+        model = ISSMRegressor(**PAPER_ISSM, n_init=1, max_iter=2, random_state=0)
         model.fit(X[0], Y[0])
     data = model._stack([X[1]], [Y[1]])
     w = model.coefs_
@@ -76,7 +69,7 @@ def main() -> None:
         "| fit (one restart, 2 records of 2000, 1 validation) | seconds |",
         "|---|---|",
     ]
-    for label, params in [("paper configuration", PAPER), ("defaults", {})]:
+    for label, params in [("paper configuration", PAPER_ISSM), ("defaults", {})]:
         est = ISSMRegressor(**params, n_init=1, random_state=0)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

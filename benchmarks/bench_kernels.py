@@ -34,16 +34,7 @@ from test_tdl import _twin_run  # noqa: E402 - the NumPy twin lives with the tes
 
 from sysid_nn import HystereticOscillator, TDLRegressor  # noqa: E402
 from sysid_nn._base import _FREE_RUN  # noqa: E402
-
-PAPER = dict(
-    output_lags=6,
-    input_lags=5,
-    hidden_layer_sizes=(9,),
-    activation="logistic",
-    linear_bypass=False,
-    lag_representation="delays",
-    focus="prediction",
-)
+from sysid_nn.study import PAPER_TDL  # noqa: E402
 
 FIRST_CALL = """
 import time, numpy as np
@@ -82,7 +73,8 @@ def _kernel_row(rec, n: int) -> str:
     y = rec.displacement[0, :n]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model = TDLRegressor(**PAPER, n_init=1, max_iter=1, random_state=0).fit(X, y)
+        model = TDLRegressor(**PAPER_TDL, n_init=1, max_iter=1, random_state=0)
+        model.fit(X, y)
     data = model._stack([X], [y[:, None]])
     w = model.coefs_
     assert len(w) == 118
@@ -120,7 +112,7 @@ def main() -> str:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         start = time.perf_counter()
-        model = TDLRegressor(**PAPER, n_init=1, max_iter=200, random_state=0)
+        model = TDLRegressor(**PAPER_TDL, n_init=1, max_iter=200, random_state=0)
         model.fit(X, y)
         fit = time.perf_counter() - start
     lines += [

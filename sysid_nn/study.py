@@ -42,6 +42,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from importlib import metadata
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -58,7 +59,9 @@ from sysid_nn.residuals import analyze_residuals
 __all__ = [
     "FIGURES",
     "MODES",
+    "PAPER_ISSM",
     "PAPER_MODELS",
+    "PAPER_TDL",
     "StudyConfig",
     "StudyModel",
     "evaluate",
@@ -78,6 +81,34 @@ MODES = ("prediction", "simulation")
 
 #: Names of the study's models, in the order they are shown.
 PAPER_MODELS = ("tdl_paper", "issm_paper", "linear", "tdl", "issm")
+
+#: The paper's TDL network (section 4.2): 6 displacement and 5 excitation
+#: lags, 9 logistic hidden nodes, no bypass, plain delays, trained one step
+#: ahead; ``TDLRegressor(**PAPER_TDL)``. The paper fits it at dt = 0.03 s.
+PAPER_TDL = MappingProxyType(
+    {
+        "output_lags": 6,
+        "input_lags": 5,
+        "hidden_layer_sizes": (9,),
+        "activation": "logistic",
+        "linear_bypass": False,
+        "lag_representation": "delays",
+        "focus": "prediction",
+    }
+)
+
+#: The paper's ISSM network (section 4.2): 3 states, 7 logistic hidden
+#: nodes, no linear part, trained on the innovations;
+#: ``ISSMRegressor(**PAPER_ISSM)`` with displacement and velocity measured.
+PAPER_ISSM = MappingProxyType(
+    {
+        "n_states": 3,
+        "hidden_layer_sizes": (7,),
+        "activation": "logistic",
+        "linear_part": False,
+        "focus": "prediction",
+    }
+)
 
 # Residual tests of figs 4.3-4.4 whose pass rates are reported.
 _TESTS = ("whiteness", "cross_positive", "cross_negative")
@@ -444,32 +475,16 @@ def model_specs(config: StudyConfig) -> dict[str, StudyModel]:
     >>> {name: (m.label, m.step) for name, m in specs.items()}
     {'tdl_paper': ('TDL (paper)', 3), 'linear': ('linear (OE)', 1)}
     """
-    paper_tdl = {
-        "output_lags": 6,
-        "input_lags": 5,
-        "hidden_layer_sizes": (9,),
-        "activation": "logistic",
-        "linear_bypass": False,
-        "lag_representation": "delays",
-        "focus": "prediction",
-    }
-    paper_issm = {
-        "n_states": 3,
-        "hidden_layer_sizes": (7,),
-        "activation": "logistic",
-        "linear_part": False,
-        "focus": "prediction",
-    }
     force, disp, both = ("excitation",), ("displacement",), ("displacement", "velocity")
     table: dict[str, tuple[str, Any, dict, tuple[str, ...], int]] = {
         "tdl_paper": (
             "TDL (paper)",
             TDLRegressor,
-            paper_tdl,
+            PAPER_TDL,
             disp,
             config.paper_tdl_step,
         ),
-        "issm_paper": ("ISSM (paper)", ISSMRegressor, paper_issm, both, 1),
+        "issm_paper": ("ISSM (paper)", ISSMRegressor, PAPER_ISSM, both, 1),
         "linear": ("linear (OE)", TDLRegressor, {"hidden_layer_sizes": ()}, disp, 1),
         "tdl": ("TDL (default)", TDLRegressor, {}, disp, 1),
         "issm": ("ISSM (default)", ISSMRegressor, {}, both, 1),
