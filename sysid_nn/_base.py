@@ -138,10 +138,6 @@ class _Data:
         """Modelled rows that count in a validation score."""
         return self.modelled[self.skip :]
 
-    @property
-    def lengths(self) -> np.ndarray:
-        return np.diff(self.starts) - self.h
-
 
 # --------------------------------------------------------------------------
 # input handling
@@ -749,8 +745,8 @@ default=None
 def _mean_scale(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     mean = a.mean(axis=0)
     scale = a.std(axis=0)
+    # Constant channels (relative to their level) are left unscaled.
     scale[scale < 1e-12 * np.maximum(1.0, np.abs(mean))] = 1.0
-    scale[scale == 0.0] = 1.0
     return mean, scale
 
 
