@@ -406,10 +406,8 @@ default=None
             ys = (
                 y0
                 if initial is None
-                else (initial[s][: self.n_outputs_] - self._y_mean)
+                else (initial[s][: self.n_outputs_] - self._y_mean) / self._y_scale
             )
-            if initial is not None:
-                ys = ys / self._y_scale
             Yh.append(np.broadcast_to(ys, (h, self.n_outputs_)).copy())
         return Yh, [u0] * n_seq
 
