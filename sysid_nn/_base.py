@@ -14,12 +14,15 @@ from __future__ import annotations
 import inspect
 import numbers
 import textwrap
+import threading
 import time
 import warnings
+from contextlib import contextmanager
 from dataclasses import dataclass
 from itertools import pairwise
 
 import numpy as np
+import threadpoolctl
 from joblib import Parallel, delayed
 from scipy.optimize import minimize
 from sklearn.base import BaseEstimator
@@ -27,7 +30,6 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
-from threadpoolctl import threadpool_limits
 
 __all__ = ["DivergenceWarning"]
 
@@ -39,6 +41,46 @@ _DIVERGENCE_FACTOR = 100.0
 _ONE_STEP_SHARE = 2.0 / 3.0
 _SHOOTING_SHARE = 4.0 / 15.0
 _FREE_RUN = np.iinfo(np.int64).max // 4
+
+# BLAS thread limits are process-wide: fits running in threads of one process
+# (the threading backend, in-process dask workers, GridSearchCV with threads)
+# share one limit, set by the first to enter and restored by the last to
+# leave. A limit per thread would be lifted under the others by the first to
+# finish, and their results would then depend on timing (multi-threaded BLAS
+# rounds differently). threadpoolctl >= 3.8 lets only one thread change
+# OpenBLAS limits: the control is released after each restore, so that the
+# next fit can take it from whichever thread it runs in.
+_BLAS_LOCK = threading.Lock()
+_BLAS_USERS = 0
+_BLAS_LIMIT = None
+
+
+def _release_blas_control() -> None:
+    controller = getattr(threadpoolctl, "OpenBLASController", None)
+    release = getattr(controller, "clear_controlling_thread", None)
+    if release is not None:
+        release(force=True)
+
+
+@contextmanager
+def _single_threaded_blas():
+    """BLAS single-threaded in this process while any fit runs in it."""
+    global _BLAS_USERS, _BLAS_LIMIT
+    with _BLAS_LOCK:
+        if _BLAS_USERS == 0:
+            _release_blas_control()
+            _BLAS_LIMIT = threadpoolctl.threadpool_limits(limits=1, user_api="blas")
+        _BLAS_USERS += 1
+    try:
+        yield
+    finally:
+        with _BLAS_LOCK:
+            _BLAS_USERS -= 1
+            if _BLAS_USERS == 0:
+                _release_blas_control()
+                _BLAS_LIMIT.restore_original_limits()
+                _release_blas_control()
+                _BLAS_LIMIT = None
 
 
 #: Parameter descriptions shared by the estimators' docstrings.
@@ -449,28 +491,31 @@ class _RecurrentRegressorBase(BaseEstimator):
         if val is not None:
             val.skip = skip
         self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train.Y).max())
-        self._prepare_structure(train)
+        # The initial fit and the selection use BLAS too; see _single_threaded_blas.
+        with _single_threaded_blas():
+            self._prepare_structure(train)
 
-        rng = check_random_state(self.random_state)
-        seeds = rng.randint(np.iinfo(np.int32).max, size=self.n_init)
-        start = time.perf_counter()
-        runs = Parallel(n_jobs=self.n_jobs if self.n_init > 1 else None)(
-            delayed(self._fit_one)(train, val, seed, k) for k, seed in enumerate(seeds)
-        )
-        best = min(range(len(runs)), key=lambda k: runs[k].score)
-        chosen = runs[best]
-        if not np.all(np.isfinite(chosen.w)):
-            raise ValueError(
-                "The solver produced non-finite weights. Check the data for "
-                "extreme values or reduce the learning problem (fewer lags)."
+            rng = check_random_state(self.random_state)
+            seeds = rng.randint(np.iinfo(np.int32).max, size=self.n_init)
+            start = time.perf_counter()
+            runs = Parallel(n_jobs=self.n_jobs if self.n_init > 1 else None)(
+                delayed(self._fit_one)(train, val, seed, k)
+                for k, seed in enumerate(seeds)
             )
-        self.coefs_ = chosen.w
-        self.n_iter_ = chosen.n_iter
-        self.loss_ = chosen.loss
-        self.best_validation_score_ = -chosen.val_loss if val is not None else None
-        self.restart_scores_ = np.array([-r.score for r in runs])
-        self.fit_time_ = time.perf_counter() - start
-        self._after_fit(train)
+            best = min(range(len(runs)), key=lambda k: runs[k].score)
+            chosen = runs[best]
+            if not np.all(np.isfinite(chosen.w)):
+                raise ValueError(
+                    "The solver produced non-finite weights. Check the data for "
+                    "extreme values or reduce the learning problem (fewer lags)."
+                )
+            self.coefs_ = chosen.w
+            self.n_iter_ = chosen.n_iter
+            self.loss_ = chosen.loss
+            self.best_validation_score_ = -chosen.val_loss if val is not None else None
+            self.restart_scores_ = np.array([-r.score for r in runs])
+            self.fit_time_ = time.perf_counter() - start
+            self._after_fit(train)
         if not chosen.converged:
             warnings.warn(
                 f"{type(self).__name__} stopped after max_iter={self.max_iter} "
@@ -536,7 +581,7 @@ class _RecurrentRegressorBase(BaseEstimator):
         """One restart through the whole schedule; returns a :class:`_Run`."""
         # The linear algebra here is small (tens to hundreds of weights):
         # threaded BLAS only spins, and restarts already run in parallel.
-        with threadpool_limits(limits=1, user_api="blas"):
+        with _single_threaded_blas():
             return self._fit_one_serial(train, val, seed, k)
 
     def _fit_one_serial(self, train, val, seed, k):

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import pickle
+import threading
 import warnings
 
 import joblib
 import numpy as np
 import pytest
+import threadpoolctl
 from scipy.linalg import solve_discrete_are
 from sklearn.exceptions import ConvergenceWarning, NotFittedError
 from sklearn.model_selection import GridSearchCV, KFold
@@ -395,3 +397,34 @@ def test_simulation_continues_from_its_own_state_and_past_excitation():
         X[0][k0:], initial_state=states[k0 - 1], initial_inputs=X[0][:k0]
     )
     np.testing.assert_allclose(resumed, full[k0:], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_fits_in_other_threads_match_the_serial_fit():
+    # Multi-threaded BLAS rounds differently: every fit must run under the
+    # same BLAS limit, whichever thread runs it and whatever ran before it.
+    from sysid_nn import HystereticOscillator
+
+    data = HystereticOscillator().generate(2, n_samples=600, random_state=3)
+    X, y = data.excitation[0][:, None], data.displacement[0][:, None]
+
+    def fit(**params):
+        est = ISSMRegressor(max_iter=4, n_init=2, focus="prediction", random_state=0)
+        return est.set_params(**params).fit(X, y).coefs_
+
+    def blas_limits():
+        info = threadpoolctl.threadpool_info()
+        return {lib["filepath"]: lib["num_threads"] for lib in info}
+
+    serial = fit()
+    before = blas_limits()
+    with joblib.parallel_backend("threading"):
+        threaded_restarts = fit(n_jobs=2)
+    in_thread = {}
+    worker = threading.Thread(target=lambda: in_thread.setdefault("w", fit()))
+    worker.start()
+    worker.join()
+    np.testing.assert_array_equal(threaded_restarts, serial)
+    np.testing.assert_array_equal(in_thread["w"], serial)
+    # The limit is lifted afterwards, whichever thread was the last to leave.
+    assert blas_limits() == before
