@@ -20,7 +20,7 @@ worst) over the 25 of them.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.signal import butter, filtfilt
@@ -113,6 +113,26 @@ def make_split(
         train_idx=[int(i) for i in train],
         val_idx=[int(i) for i in val],
         test_idx=[int(i) for i in test],
+    )
+
+
+def with_noise(split: Split, level: float, seed: int) -> Split:
+    """The split with white measurement noise on the training and validation outputs.
+
+    Each output column gets Gaussian noise of ``level`` times its own standard
+    deviation, drawn from ``seed`` so that every model sees the same noisy
+    records. The test records stay noise-free: models are scored against
+    the true response.
+    """
+    rng = np.random.default_rng(seed)
+
+    def noisy(y):
+        return y + level * y.std(axis=0) * rng.standard_normal(y.shape)
+
+    return replace(
+        split,
+        y_train=[noisy(y) for y in split.y_train],
+        y_val=[noisy(y) for y in split.y_val],
     )
 
 

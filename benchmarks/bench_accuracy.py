@@ -17,6 +17,10 @@ dt = 0.01 s and dt = 0.03 s, and scores on the test records:
   residuals (max lag 25, 5 % level);
 * fit time.
 
+With measurement noise (P1, dt = 0.01; white noise of 0.01 %, 0.1 % and 1 % of
+each output's standard deviation on the training and validation records, the
+test records noise-free) the free-run scores are measured again.
+
 NRMSE = RMS error / standard deviation of the measured signal, per record;
 for the ISSM with displacement and velocity measured the displacement column
 is scored. Writes ``results.md`` and ``results_accuracy.csv`` next to this
@@ -61,6 +65,10 @@ except (ImportError, AttributeError):  # pragma: no cover
 DEFAULT_SEED = 2024
 ROBUSTNESS_SEEDS = (2025, 2026)
 ROBUSTNESS_MODELS = ("tdl", "issm_xv", "linear")
+#: Measurement-noise levels (fraction of each output's standard deviation) on
+#: the training and validation outputs, P1 at dt = 0.01 with the main seed.
+NOISE_LEVELS = (0.0001, 0.001, 0.01)
+NOISE_MODELS = ("tdl", "issm_xv", "issm_x", "linear")
 N_JOBS = 2
 RANDOM_STATE = 0
 
@@ -234,7 +242,8 @@ COLUMNS = [
 def add_ratios(rows: list[dict]) -> None:
     groups: dict = {}
     for r in rows:
-        groups.setdefault((r["seed"], r["dt"], r["protocol"]), []).append(r)
+        key = (r["seed"], r["dt"], r["protocol"], r.get("noise", 0.0))
+        groups.setdefault(key, []).append(r)
     for group in groups.values():
         lin = next(
             (r for r in group if r["model"] == "linear" and "free_median" in r), None
@@ -258,13 +267,14 @@ def table(rows: list[dict]) -> list[str]:
     return lines
 
 
-def find(rows, seed, dt, protocol, model):
+def find(rows, seed, dt, protocol, model, noise=0.0):
     for r in rows:
-        if (r["seed"], r["dt"], r["protocol"], r["model"]) == (
+        if (r["seed"], r["dt"], r["protocol"], r["model"], r.get("noise", 0.0)) == (
             seed,
             dt,
             protocol,
             model,
+            noise,
         ):
             return r if "free_median" in r else None
     return None
@@ -392,6 +402,37 @@ def machine_info() -> list[str]:
     ]
 
 
+def noise_section(rows: list[dict], seed: int) -> list[str]:
+    """Median free-run NRMSE (and ratio to linear) against the noise level."""
+    levels = sorted({r.get("noise", 0.0) for r in rows} - {0.0})
+    if not levels:
+        return []
+    columns = [0.0, *levels]
+    lines = [
+        f"## Measurement noise (P1, dt = 0.01 s, seed {seed})",
+        "",
+        "Median free-run NRMSE on the noise-free test records (ratio to the linear "
+        "model trained on the same noisy records); noise in % of each output's "
+        "standard deviation, on the training and validation records only.",
+        "",
+        "| model | " + " | ".join(f"{100 * lv:g} %" for lv in columns) + " |",
+        "|" + "---|" * (len(columns) + 1),
+    ]
+    for model in NOISE_MODELS:
+        found = [find(rows, seed, 0.01, "P1", model, lv) for lv in columns]
+        if all(r is None for r in found):
+            continue
+        cells = [
+            "-"
+            if r is None
+            else f"{r['free_median']:.3g}"
+            + (f" ({r['ratio']:.2g})" if "ratio" in r else "")
+            for r in found
+        ]
+        lines.append(f"| {MODELS[model][0]} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
 def write_report(rows, args, elapsed, out_dir: Path, seeds_main, issm_note) -> None:
     lines = [
         "# Accuracy benchmark",
@@ -421,7 +462,8 @@ def write_report(rows, args, elapsed, out_dir: Path, seeds_main, issm_note) -> N
                 sub = [
                     r
                     for r in rows
-                    if (r["seed"], r["dt"], r["protocol"]) == (seed, dt, protocol)
+                    if (r["seed"], r["dt"], r["protocol"], r.get("noise", 0.0))
+                    == (seed, dt, protocol, 0.0)
                 ]
                 if not sub:
                     continue
@@ -433,6 +475,7 @@ def write_report(rows, args, elapsed, out_dir: Path, seeds_main, issm_note) -> N
                 ]
                 lines += [*table(sub), ""]
     main_seed = seeds_main
+    lines += noise_section(rows, main_seed)
     lines += ["## Targets", "", *targets(rows, main_seed), ""]
     rob = [r for r in rows if r["seed"] != main_seed and "free_median" in r]
     if rob:
@@ -477,6 +520,12 @@ def main(argv: list[str]) -> int:
         default=None,
         help="extra pool seeds for P1 at dt = 0.01 (default 2025,2026; 'none' to skip)",
     )
+    ap.add_argument(
+        "--noise-levels",
+        default=None,
+        help="measurement-noise levels for P1 at dt = 0.01, as fractions of each "
+        "output's std (default 0.0001,0.001,0.01; 'none' to skip)",
+    )
     ap.add_argument("--out", default=None, help="output directory")
     args = ap.parse_args(argv)
     args.argv = argv
@@ -493,6 +542,12 @@ def main(argv: list[str]) -> int:
         "none" if quick else ",".join(map(str, ROBUSTNESS_SEEDS))
     )
     rob_seeds = [] if rob_arg == "none" else [int(s) for s in rob_arg.split(",")]
+    noise_arg = args.noise_levels or (
+        "none" if quick else ",".join(map(str, NOISE_LEVELS))
+    )
+    noise_levels = (
+        [] if noise_arg == "none" else [float(v) for v in noise_arg.split(",")]
+    )
     out_dir = (
         Path(args.out)
         if args.out
@@ -513,19 +568,35 @@ def main(argv: list[str]) -> int:
 
     start = time.perf_counter()
     rows: list[dict] = []
-    jobs = [(args.seed, dt, pr, m) for dt in dts for pr in protocols for m in models]
+    jobs = [
+        (args.seed, dt, pr, m, 0.0) for dt in dts for pr in protocols for m in models
+    ]
     jobs += [
-        (s, 0.01, "P1", m) for s in rob_seeds for m in ROBUSTNESS_MODELS if m in models
+        (s, 0.01, "P1", m, 0.0)
+        for s in rob_seeds
+        for m in ROBUSTNESS_MODELS
+        if m in models
+    ]
+    jobs += [
+        (args.seed, 0.01, "P1", m, lv)
+        for lv in noise_levels
+        for m in NOISE_MODELS
+        if m in models
     ]
     pools: dict = {}
     n_test = 5 if quick else P.N_TEST
-    for seed, dt, protocol, model in jobs:
+    for seed, dt, protocol, model, noise in jobs:
         if seed not in pools:
             pools[seed] = P.make_pool(seed)
         split = P.make_split(pools[seed], protocol, dt, MODELS[model][2], n_test=n_test)
+        if noise:
+            # The same noise for every model: drawn from the seed and the level.
+            split = P.with_noise(split, noise, seed=(seed, round(noise * 1e6)))
         t0 = time.perf_counter()
         row = evaluate(model, split, quick)
-        row.update(seed=seed, train_idx=split.train_idx, val_idx=split.val_idx)
+        row.update(
+            seed=seed, noise=noise, train_idx=split.train_idx, val_idx=split.val_idx
+        )
         rows.append(row)
         status = row.get("error") or (
             f"fit {row['fit_s']:.1f} s, free median {row['free_median']:.4f}, "
@@ -534,7 +605,8 @@ def main(argv: list[str]) -> int:
         )
         print(
             f"[{time.perf_counter() - start:6.0f} s] seed {seed} dt {dt} {protocol} "
-            f"{model}: {status} ({time.perf_counter() - t0:.0f} s)",
+            f"{model}{f' noise {noise:g}' if noise else ''}: {status} "
+            f"({time.perf_counter() - t0:.0f} s)",
             flush=True,
         )
         add_ratios(rows)

@@ -515,7 +515,7 @@ class _RecurrentRegressorBase(BaseEstimator):
             self.best_validation_score_ = -chosen.val_loss if val is not None else None
             self.restart_scores_ = np.array([-r.score for r in runs])
             self.fit_time_ = time.perf_counter() - start
-            self._after_fit(train)
+            self._after_fit(train, val)
         if not chosen.converged:
             warnings.warn(
                 f"{type(self).__name__} stopped after max_iter={self.max_iter} "
@@ -543,7 +543,7 @@ class _RecurrentRegressorBase(BaseEstimator):
     def _validate_outputs(self) -> None:
         """Hook for output-count checks (ISSM: ``n_states >= n_outputs``)."""
 
-    def _after_fit(self, train: _Data) -> None:
+    def _after_fit(self, train: _Data, val: _Data | None) -> None:
         """Hook run once the weights are chosen."""
 
     def _split_validation(self, Xs, ys, min_len):

@@ -34,6 +34,9 @@ _INNOVATION_REFIT_ITERS = 40
 #: Factors tried on the innovation weights, largest first, until the one-step
 #: predictor is stable (0 makes it the free run, stable with the simulator).
 _INNOVATION_SHRINKS = (1.0, 0.5, 0.25, 0.125, 0.0625, 0.0)
+#: A more shrunk innovation gain is preferred while its one-step validation
+#: loss stays within this factor of the best.
+_INNOVATION_MARGIN = 1.2
 
 
 class UnstablePredictorWarning(UserWarning):
@@ -652,9 +655,9 @@ default=None
         return Yhat
 
     # ---------------------------------------------------- stable predictor
-    def _after_fit(self, train: _Data) -> None:
+    def _after_fit(self, train: _Data, val: _Data | None) -> None:
         if self.focus == "simulation":
-            self.coefs_ = self._refit_innovations(self.coefs_, train)
+            self.coefs_ = self._refit_innovations(self.coefs_, train, val)
         rho = self._predictor_radius(self.coefs_, train)
         self.predictor_spectral_radius_ = rho
         if not rho < 1.0:
@@ -680,10 +683,14 @@ default=None
         w[self._innovation_index()] = w[measured]
         return w
 
-    def _refit_innovations(self, w: np.ndarray, train: _Data) -> np.ndarray:
+    def _refit_innovations(
+        self, w: np.ndarray, train: _Data, val: _Data | None
+    ) -> np.ndarray:
         """Refit the weights on ``E`` to the one-step loss.
 
-        They do not enter the free run, which therefore stays unchanged.
+        They do not enter the free run, which therefore stays unchanged. The
+        choice among the refit and its shrunk versions is judged on the
+        validation data when there are any.
         """
         n_res = len(train.modelled) * self.n_outputs_
         objective = _Objective(self, train, 1, self._penalty_mask(), n_res)
@@ -698,21 +705,36 @@ default=None
             refit = start.copy()
             refit[idx] = v
             candidates.insert(0, refit)
-        # Selection keeps the one-step predictor stable: each candidate's
-        # innovation weights are shrunk towards zero (where the predictor is
-        # the free run) until its innovation form is stable, and the lowest
-        # one-step loss among the stable ones wins. The refit alone can leave
-        # it unstable; dropping the innovations altogether would leave the
-        # one-step predictor no better than the free run.
+        # Selection keeps the one-step predictor stable: the innovation
+        # weights of each candidate are shrunk towards zero (where the
+        # predictor is the free run) in steps, and among the versions whose
+        # innovation form is stable along the training data the lowest
+        # one-step loss on the validation data wins. A refit to noisy records
+        # can be stable on them and still diverge on others; dropping the
+        # innovations altogether would leave the one-step predictor no better
+        # than the free run.
+        check = None
+        if val is not None:
+            n_val = len(val.modelled) * self.n_outputs_
+            check = _Objective(self, val, 1, self._penalty_mask(), n_val)
         stable = []
         for candidate in candidates:
             for shrink in _INNOVATION_SHRINKS:
                 shrunk = candidate.copy()
                 shrunk[idx] *= shrink
-                if self._predictor_radius(shrunk, train) < 1.0:
-                    stable.append(shrunk)
-                    break
-        return min(stable, key=objective.loss) if stable else candidates[0]
+                if self._predictor_radius(shrunk, train) < 1.0 and (
+                    check is None or np.isfinite(check.loss(shrunk))
+                ):
+                    stable.append((objective.loss(shrunk), shrink, shrunk))
+        if not stable:
+            return candidates[0]
+        best = min(loss for loss, _, _ in stable)
+        if not np.isfinite(best):
+            return stable[0][2]
+        # The most shrunk version within a margin of the best: a predictor at
+        # the edge of stability on a few records diverges on others.
+        near = [entry for entry in stable if entry[0] <= _INNOVATION_MARGIN * best]
+        return min(near, key=lambda entry: (entry[1], entry[0]))[2]
 
     def _predictor_radius(self, w: np.ndarray, data: _Data) -> float:
         """Spectral radius of the mean ``Phi(t) - K(t) H`` of the one-step predictor."""
