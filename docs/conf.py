@@ -33,7 +33,6 @@ matplotlib.use("Agg")
 
 DOCS_DIR = Path(__file__).resolve().parent
 ROOT_DIR = DOCS_DIR.parent
-PACKAGE_DIR = ROOT_DIR / "sysid_nn"
 GENERATED_DIR = DOCS_DIR / "generated"
 INVENTORY_DIR = DOCS_DIR / "_intersphinx"
 
@@ -189,31 +188,11 @@ _API_PAGES = [
 ]
 
 
-def _module_file_exists(module_name: str) -> bool:
-    parts = module_name.split(".")[1:]
-    if not parts:
-        return (PACKAGE_DIR / "__init__.py").is_file()
-    base = PACKAGE_DIR.joinpath(*parts)
-    return base.with_suffix(".py").is_file() or (base / "__init__.py").is_file()
-
-
-def _is_missing_module(exc: ModuleNotFoundError) -> bool:
-    """Whether ``exc`` reports a package module whose file is not written yet."""
-    name = exc.name or ""
-    return name.startswith("sysid_nn.") and not _module_file_exists(name)
-
-
 def _public_names(module) -> list[str]:
-    """Names of ``module.__all__`` that resolve (lazy re-exports included)."""
-    names = []
-    for name in getattr(module, "__all__", []):
-        try:
-            getattr(module, name)
-        except ModuleNotFoundError as exc:
-            if _is_missing_module(exc):
-                continue
-            raise
-        names.append(name)
+    """Names of ``module.__all__``; each is resolved, so a broken re-export fails."""
+    names = list(getattr(module, "__all__", []))
+    for name in names:
+        getattr(module, name)
     return names
 
 
@@ -246,10 +225,7 @@ def _write_api_pages() -> list[str]:
     written = []
     top_level = set(_public_names(sysid_nn))
     for page, title, module_name in _API_PAGES:
-        if not _module_file_exists(module_name):
-            print(f"[sysid_nn docs] {module_name}: not written yet, left out")
-            continue
-        module = importlib.import_module(module_name)  # must import if it exists
+        module = importlib.import_module(module_name)
         names = _public_names(module)
         if module_name != "sysid_nn":
             # Names re-exported at the top level are documented there once.
