@@ -688,12 +688,16 @@ default=None
     ) -> np.ndarray:
         """Refit the weights on ``E`` to the one-step loss.
 
-        They do not enter the free run, which therefore stays unchanged. The
-        choice among the refit and its shrunk versions is judged on the
-        validation data when there are any.
+        They do not enter the free run, which therefore stays unchanged. A
+        version of the gain counts only if its one-step predictor also stays
+        finite on the validation data, when there are any.
         """
-        n_res = len(train.modelled) * self.n_outputs_
-        objective = _Objective(self, train, 1, self._penalty_mask(), n_res)
+        mask = self._penalty_mask()
+
+        def one_step(data: _Data) -> _Objective:
+            return _Objective(self, data, 1, mask, len(data.modelled) * self.n_outputs_)
+
+        objective = one_step(train)
         idx = self._innovation_index()
         candidates = [self._substitution_gain(w), w]
         start = min(candidates, key=objective.loss)
@@ -707,16 +711,13 @@ default=None
             candidates.insert(0, refit)
         # Selection keeps the one-step predictor stable: the innovation
         # weights of each candidate are shrunk towards zero (where the
-        # predictor is the free run) in steps, and among the versions whose
-        # innovation form is stable along the training data the lowest
-        # one-step loss on the validation data wins. A refit to noisy records
-        # can be stable on them and still diverge on others; dropping the
-        # innovations altogether would leave the one-step predictor no better
-        # than the free run.
-        check = None
-        if val is not None:
-            n_val = len(val.modelled) * self.n_outputs_
-            check = _Objective(self, val, 1, self._penalty_mask(), n_val)
+        # predictor is the free run) in steps; a version counts if its
+        # innovation form is stable along the training data and its one-step
+        # predictor stays finite on the validation data. A refit to noisy
+        # records can be stable on them and still diverge on others; dropping
+        # the innovations altogether would leave the one-step predictor no
+        # better than the free run.
+        check = one_step(val) if val is not None else None
         stable = []
         for candidate in candidates:
             for shrink in _INNOVATION_SHRINKS:
