@@ -496,9 +496,10 @@ class _RecurrentRegressorBase(BaseEstimator):
             self._prepare_structure(train)
 
             rng = check_random_state(self.random_state)
-            seeds = rng.randint(np.iinfo(np.int32).max, size=self.n_init)
+            n_runs = self._n_restarts()
+            seeds = rng.randint(np.iinfo(np.int32).max, size=n_runs)
             start = time.perf_counter()
-            runs = Parallel(n_jobs=self.n_jobs if self.n_init > 1 else None)(
+            runs = Parallel(n_jobs=self.n_jobs if n_runs > 1 else None)(
                 delayed(self._fit_one)(train, val, seed, k)
                 for k, seed in enumerate(seeds)
             )
@@ -566,6 +567,14 @@ class _RecurrentRegressorBase(BaseEstimator):
         yhead = [*ys[:-1], ys[-1][:-n_val]]
         return head, yhead, [Xs[-1]], [ys[-1]], n - n_val
 
+    def _n_restarts(self) -> int:
+        """Number of training runs from different random starts."""
+        return self.n_init
+
+    def _final_segment(self) -> int:
+        """Segment length of the loss that selection and ``loss_`` judge by."""
+        return 1 if self.focus == "prediction" else _FREE_RUN
+
     def _stages(self) -> list[tuple[int, int]]:
         """``(segment length, iterations)`` of each training stage."""
         if self.focus == "prediction":
@@ -590,7 +599,7 @@ class _RecurrentRegressorBase(BaseEstimator):
         mask = self._penalty_mask()
         n_res = len(train.modelled) * self.n_outputs_
         stages = self._stages()
-        final_seg = stages[-1][0]
+        final_seg = self._final_segment()
         tracker = _Tracker(self, val, final_seg, w)
         converged = True
         n_iter = 0

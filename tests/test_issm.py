@@ -246,7 +246,12 @@ ROWS_ARE_TIME = "rows are time steps of a recurrence, not independent samples"
 
 
 @parametrize_with_checks(
-    [ISSMRegressor(hidden_layer_sizes=(3,), n_init=1, max_iter=6, random_state=0)],
+    [
+        ISSMRegressor(hidden_layer_sizes=(3,), n_init=1, max_iter=6, random_state=0),
+        ISSMRegressor(
+            init="tdl", hidden_layer_sizes=(3,), n_init=1, max_iter=6, random_state=0
+        ),
+    ],
     expected_failed_checks=lambda est: {
         "check_methods_subset_invariance": ROWS_ARE_TIME,
         "check_methods_sample_order_invariance": ROWS_ARE_TIME,
@@ -372,6 +377,81 @@ def test_unstable_predictor_warns():
 def test_bad_input_is_explained(X, y, params, match):
     with pytest.raises(ValueError, match=match):
         ISSMRegressor(n_init=1, max_iter=2, **params).fit(X, y)
+
+
+# --------------------------------------------------------------------------
+# start from a TDL network realised in state space
+# --------------------------------------------------------------------------
+TDL_CASES = [
+    # (outputs, inputs, hidden, activation, input_delay)
+    (1, 1, (4,), "tanh", 1),
+    (2, 2, (3, 2), "logistic", 0),
+    (1, 1, (), "tanh", 2),
+]
+
+
+def _tdl_records(p, m, n_seq=3, n=150, seed=0):
+    rng = np.random.default_rng(seed)
+    X = [rng.standard_normal((n, m)) + 0.5 for _ in range(n_seq)]
+    y = []
+    for u in X:
+        x = np.zeros(2)
+        out = np.empty((n, 2))
+        for t in range(n):
+            out[t] = x
+            x = np.array([1.2 * x[0] - 0.5 * x[1], x[0]]) + 0.3 * u[t].sum()
+            x[0] += 0.2 * np.tanh(2.0 * x[0])
+        y.append(out[:, :p] + 1.0)
+    return X, y
+
+
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+@pytest.mark.parametrize(("p", "m", "hidden", "activation", "delay"), TDL_CASES)
+def test_tdl_start_runs_exactly_as_its_tdl(p, m, hidden, activation, delay):
+    X, y = _tdl_records(p, m)
+    params = dict(
+        hidden_layer_sizes=hidden, activation=activation, input_delay=delay,
+        init="tdl", n_init=2, max_iter=6, random_state=0,
+    )  # fmt: skip
+    # With the prediction focus no innovation gain is refitted: the one-step
+    # predictor is the TDL's too (measured outputs in every lag).
+    model = ISSMRegressor(focus="prediction", **params).fit(X[:2], y[:2])
+    Xn, yn = X[2], y[2]
+    assert model.n_states_ == 3 * p + 2 * m
+    assert len(model.restart_scores_) == 2
+    np.testing.assert_allclose(model.simulate(Xn), model.tdl_.simulate(Xn), atol=1e-10)
+    for k in (1, 5):
+        np.testing.assert_allclose(
+            model.predict(Xn, yn, horizon=k),
+            model.tdl_.predict(Xn, yn, horizon=k),
+            atol=1e-10,
+        )
+    # The realisation holds in any internal units of the state-space model.
+    model._y_mean, model._y_scale = model._y_mean + 0.7, model._y_scale * 3.0
+    model._x_mean, model._x_scale = model._x_mean - 0.4, model._x_scale * 0.5
+    model.coefs_, _ = model._realise_tdl(model.tdl_)
+    np.testing.assert_allclose(model.simulate(Xn), model.tdl_.simulate(Xn), atol=1e-9)
+    np.testing.assert_allclose(
+        model.predict(Xn, yn), model.tdl_.predict(Xn, yn), atol=1e-9
+    )
+    # The simulation focus refits the innovation gain and keeps the free run.
+    model = ISSMRegressor(**params).fit(X[:2], y[:2])
+    np.testing.assert_allclose(model.simulate(Xn), model.tdl_.simulate(Xn), atol=1e-10)
+    assert model.predictor_spectral_radius_ < 1.0
+
+
+@pytest.mark.parametrize(
+    ("params", "match"),
+    [
+        ({"n_states": 3}, "n_states = 5"),
+        ({"linear_part": False}, "linear_part=True"),
+        ({"init": "pca"}, "init"),
+    ],
+)
+def test_tdl_start_explains_bad_settings(params, match):
+    X, y = _tdl_records(1, 1)
+    with pytest.raises(ValueError, match=match):
+        ISSMRegressor(init="tdl", n_init=1, max_iter=2).set_params(**params).fit(X, y)
 
 
 def test_bad_calls_after_fit():
