@@ -208,3 +208,44 @@ def residual_tests(e: np.ndarray, x: np.ndarray) -> tuple[bool, bool]:
     white = whiteness_test(e, max_lag=MAX_LAG).passed
     cross = cross_correlation_test(e, x, max_lag=MAX_LAG).passed
     return bool(white), bool(cross)
+
+
+def information_floor(pool, dt: float, n_test=N_TEST) -> dict:
+    """Scores of the true oscillator when only every ``dt`` sample is kept.
+
+    At dt = 0.03 s the excitation between kept samples is lost to every model.
+    As a reference for what the kept samples allow, the true equations are run
+    on the excitation interpolated linearly between the kept samples
+    (``np.interp`` on the 0.01 s grid): k-step predictions start from the
+    *true* state (displacement, velocity and the hysteretic component, which
+    no model sees), the free run from rest. Not a strict bound: a model may
+    guess the lost excitation better than linear interpolation. Returns the
+    same score keys as the models' rows (free-run summary, k-step medians).
+    """
+    step = round(dt / BASE_DT)
+    order = amplitude_order(pool)
+    test = order[N_RESERVED : N_RESERVED + n_test]
+    osc = HystereticOscillator()
+    fine = np.arange(pool.excitation.shape[1])
+    free, kstep = [], {k: [] for k in HORIZONS}
+    for i in test:
+        y = pool.displacement[i, ::step]
+        F = np.interp(fine, fine[::step], pool.excitation[i, ::step])
+        free.append(record_nrmse(y, osc.simulate(F, BASE_DT).displacement[::step]))
+        true = np.stack(
+            [pool.displacement[i], pool.velocity[i], pool.hysteretic[i]], axis=1
+        )
+        for k in HORIZONS:
+            # One row per start sample j: from the true state at j, k kept steps.
+            starts = np.arange(len(y) - k)
+            rows = np.stack([F[step * j : step * (j + k) + 1] for j in starts])
+            run = osc.simulate(rows, BASE_DT, initial_state=true[step * starts])
+            pred = y.copy()
+            pred[starts + k] = run.displacement[:, step * k]
+            kstep[k].append(record_nrmse(y, pred))
+    row = {f"free_{s}": v for s, v in summary(free).items()}
+    for k, v in kstep.items():
+        s = summary(v)
+        row[f"k{k}_median"], row[f"k{k}_mean"] = s["median"], s["mean"]
+    row["n_test"] = len(test)
+    return row

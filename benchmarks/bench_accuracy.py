@@ -93,6 +93,10 @@ MODELS = {
     ),
 }
 QUICK_MODELS = ("tdl", "linear")
+FLOOR_LABEL = (
+    "Reference: true oscillator from the true state, excitation interpolated "
+    "linearly between the kept samples"
+)
 
 PROTOCOL_TEXT = """\
 Pool of {n_pool} realisations of `HystereticOscillator().generate(n, n_samples=2000,
@@ -111,7 +115,10 @@ displacement only:
 - free run started at t0 = 2 s from measured outputs, scored from t0 (TDL:
   `initial_outputs` = the measured outputs before t0; ISSM: `initial_state` = the
   measured outputs at t0 - dt as the first p states, zeros elsewhere), with the
-  measured excitation before t0 (`initial_inputs`);
+  measured excitation before t0 (`initial_inputs`); for the ISSM's TDL start,
+  whose other states are past outputs and excitation, zeros there are a jump
+  from rest to the measured output, and the filtered state below is the way
+  to start it;
 - ISSM only: the same with the unmeasured states started at the one-step
   predictor's estimate from the measurements before t0
   (`predict_states(X[:k0], y[:k0])`, "filtered state");
@@ -120,6 +127,13 @@ displacement only:
 - k-step prediction medians (`predict(X, y, horizon=k)`);
 - percentage of test records whose one-step residuals pass the whiteness test
   and the cross-correlation test (both lag sides), max lag 25, 5 % level.
+
+At dt = 0.03 the excitation between kept samples is lost to every model. The
+reference row runs the true equations on the excitation interpolated linearly
+between the kept samples: k-step predictions from the true state
+(displacement, velocity and the hysteretic component, which no model sees),
+the free run from rest. It shows what the kept samples allow; it is not a
+strict bound, since a model may guess the lost excitation better.
 
 `fit s` is wall-clock training time and `load` the 1-minute load average at the
 end of the fit (2 cores shared with other work: fit times above a load of 2 are
@@ -316,7 +330,9 @@ def targets(rows: list[dict], seed: int) -> list[str]:
             if a is None or b is None:
                 out.append(f"{what} the TDL: not measured")
                 continue
-            ok = a["free_median"] <= b["free_median"]
+            # "At least as good": no worse than the TDL beyond rounding (the
+            # TDL start runs the TDL network itself, to about 1e-12).
+            ok = a["free_median"] <= b["free_median"] * (1 + 1e-6)
             out.append(
                 f"{what} the TDL (median free run): {verdict(ok)} "
                 f"({a['free_median']:.4f} vs {b['free_median']:.4f})"
@@ -345,10 +361,17 @@ def targets(rows: list[dict], seed: int) -> list[str]:
                     r["k50_median"] / lin["k50_median"],
                 )
                 ok = r10 <= 0.5 and r50 <= 0.5
+                floor = find(rows, seed, dt, protocol, "floor")
+                ref = (
+                    ""
+                    if floor is None
+                    else f"; reference {floor['k10_median'] / lin['k10_median']:.3f}"
+                    f", {floor['k50_median'] / lin['k50_median']:.3f}"
+                )
                 out.append(
                     f"- dt = {dt}, {protocol}, {MODELS[model][0]}: k-step (10, 50) "
                     f"clearly better than linear (ratio <= 0.5): {verdict(ok)} "
-                    f"(ratios {r10:.3f}, {r50:.3f})"
+                    f"(ratios {r10:.3f}, {r50:.3f}{ref})"
                 )
     r = find(rows, seed, 0.01, "P5", "tdl")
     ok = None if r is None else r["fit_s"] < 60
@@ -595,6 +618,18 @@ def main(argv: list[str]) -> int:
         )
         add_ratios(rows)
         write_report(rows, args, time.perf_counter() - start, out_dir, args.seed)
+    for dt in dts:
+        if dt == P.BASE_DT:
+            continue
+        # Reference for what the kept samples allow (the same test records
+        # for both protocols).
+        floor = P.information_floor(pools[args.seed], dt, n_test=n_test)
+        for protocol in protocols:
+            rows.append(
+                dict(floor, model="floor", label=FLOOR_LABEL, dt=dt,
+                     protocol=protocol, seed=args.seed, noise=0.0)
+            )  # fmt: skip
+    add_ratios(rows)
     elapsed = time.perf_counter() - start
     write_report(rows, args, elapsed, out_dir, args.seed)
     print((out_dir / "results.md").read_text())

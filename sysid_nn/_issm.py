@@ -185,7 +185,10 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         gives the default TDL network. With displacement alone measured and
         little measurement noise, this start identified the hysteretic
         oscillator better than ``"arx"``; with noisy records ``"arx"`` is the
-        robust choice (accuracy benchmark).
+        robust choice (accuracy benchmark). To start a free run in the middle
+        of a record, take ``initial_state`` from :meth:`predict_states` on the
+        record so far: zeros in the unmeasured states are past outputs of
+        zero here.
     focus : {"simulation", "prediction"}, default="simulation"
         What training minimises: one-step prediction errors (innovations fed
         back), or free-run simulation errors (reached through a one-step
