@@ -485,6 +485,8 @@ default=None
         # init="tdl" trains a TDL network on the same records first; it needs
         # them as given, before standardisation and stacking.
         self._fit_records = (X, y, X_val, y_val)
+        if hasattr(self, "tdl_"):
+            del self.tdl_  # from an earlier fit: it must not outlive it
         try:
             super().fit(X, y, X_val=X_val, y_val=y_val)
         finally:

@@ -438,6 +438,8 @@ def test_tdl_start_runs_exactly_as_its_tdl(p, m, hidden, activation, delay):
     model = ISSMRegressor(**params).fit(X[:2], y[:2])
     np.testing.assert_allclose(model.simulate(Xn), model.tdl_.simulate(Xn), atol=1e-10)
     assert model.predictor_spectral_radius_ < 1.0
+    # A later fit from the ARX start leaves no TDL behind.
+    assert not hasattr(model.set_params(init="arx").fit(X[:2], y[:2]), "tdl_")
 
 
 @pytest.mark.parametrize(
