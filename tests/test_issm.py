@@ -442,6 +442,24 @@ def test_tdl_start_runs_exactly_as_its_tdl(p, m, hidden, activation, delay):
     assert not hasattr(model.set_params(init="arx").fit(X[:2], y[:2]), "tdl_")
 
 
+def test_grid_search_chooses_the_start():
+    X, y = _tdl_records(1, 1, n_seq=6)
+    search = GridSearchCV(
+        ISSMRegressor(n_init=1, max_iter=5, random_state=0),
+        {"init": ["arx", "tdl"]},
+        cv=KFold(3),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        search.fit(X, y)
+    scores = search.cv_results_["mean_test_score"]
+    assert np.all(np.isfinite(scores))
+    assert search.best_params_["init"] == ["arx", "tdl"][int(np.argmax(scores))]
+    assert search.best_estimator_.n_states_ == (
+        5 if search.best_params_["init"] == "tdl" else 3
+    )
+
+
 @pytest.mark.parametrize(
     ("params", "match"),
     [
