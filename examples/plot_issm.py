@@ -260,8 +260,8 @@ for name, m in models_x.items():
 # %%
 # In this short-budget run, too, the TDL start gives the better free run. Its
 # innovation gain stays at the TDL's own one-step predictor (predictor radius
-# 0: the measured output takes the place of every lag), which on clean records
-# is also the best one-step predictor. The model keeps the network it started
-# from in ``tdl_``; its free run is that network's, to rounding:
+# 0: the measured output takes the place of every lag): on clean records the
+# refit finds nothing better within its margin. The model keeps the network
+# it started from in ``tdl_``; its free run is that network's, to rounding:
 m = models_x['init="tdl"']
 print(f"largest difference: {np.abs(m.simulate(x_j) - m.tdl_.simulate(x_j)).max():.1e}")
