@@ -93,6 +93,8 @@ MODELS = {
     ),
 }
 QUICK_MODELS = ("tdl", "linear")
+#: The default networks (and the ISSM's TDL start) the targets speak of.
+NETWORK_MODELS = ("tdl", "issm_xv", "issm_x", "issm_x_tdl")
 FLOOR_LABEL = (
     "Reference: true oscillator from the true state, excitation interpolated "
     "linearly between the kept samples"
@@ -337,7 +339,7 @@ def targets(rows: list[dict], seed: int) -> list[str]:
                 f"{what} the TDL (median free run): {verdict(ok)} "
                 f"({a['free_median']:.4f} vs {b['free_median']:.4f})"
             )
-    for model in ("tdl", "issm_xv", "issm_x", "issm_x_tdl"):
+    for model in NETWORK_MODELS:
         r = find(rows, seed, 0.03, "P5", model)
         if r is None or "ratio" not in r:
             out.append(
@@ -351,7 +353,7 @@ def targets(rows: list[dict], seed: int) -> list[str]:
     for dt in (0.01, 0.03):
         for protocol in P.PROTOCOLS:
             lin = find(rows, seed, dt, protocol, "linear")
-            for model in ("tdl", "issm_xv", "issm_x", "issm_x_tdl"):
+            for model in NETWORK_MODELS:
                 r = find(rows, seed, dt, protocol, model)
                 if r is None or lin is None:
                     continue

@@ -518,20 +518,17 @@ default=None
         self.n_states_ = n
 
     def _start_tdl(self) -> TDLRegressor:
-        """The TDL network an ``init="tdl"`` model starts from, unfitted."""
+        """The TDL network an ``init="tdl"`` model starts from, unfitted.
+
+        It gets every parameter the two estimators share (structure and
+        training); the lags are the TDL defaults the realisation assumes.
+        """
+        shared = set(self._get_param_names()) & set(TDLRegressor._get_param_names())
         return TDLRegressor(
             output_lags=_ARX_LAGS,
             input_lags=_ARX_LAGS,
-            **{
-                name: getattr(self, name)
-                for name in (
-                    "input_delay", "hidden_layer_sizes", "activation", "focus",
-                    "shooting_segments", "alpha", "solver", "max_iter", "tol",
-                    "n_init", "early_stopping", "validation_fraction",
-                    "n_iter_no_change", "random_state", "verbose", "n_jobs",
-                )
-            },
-        )  # fmt: skip
+            **{name: getattr(self, name) for name in sorted(shared)},
+        )
 
     def _realise_tdl(self, tdl: TDLRegressor) -> tuple[np.ndarray, Bunch]:
         """Weights with which this model runs exactly as the fitted ``tdl``.
