@@ -236,6 +236,11 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         Negative selection loss of every restart.
     fit_time_ : float
         Seconds spent in training.
+    output_noise_std_ : ndarray of shape (n_outputs,)
+        White measurement noise on the training outputs, estimated from the
+        records alone (residuals of a linear one-step model; an upper
+        estimate). ``fit`` warns when it swamps the outputs' second
+        difference, where the dynamics show at fine sampling.
     feature_names_in_ : ndarray
         Column names of ``X`` when it was a DataFrame.
 
@@ -319,7 +324,7 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     score = _RecurrentRegressorBase.score
 
     # -------------------------------------------------------------- public
-    def simulate(self, X, *, initial_state=None, initial_inputs=None):
+    def simulate(self, X, *, initial_state=None, initial_inputs=None, y_init=None):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
         The innovations are zero throughout (``E = 0``).
@@ -339,6 +344,18 @@ such, default=None
             Measured excitation just before the first sample, oldest first
             (1-D for one input). Default: zero excitation before the start.
             Only the last ``input_delay`` rows are used.
+        y_init : array-like of shape (n_window, n_outputs), or list, default=None
+            Measured outputs over the first ``n_window`` samples of ``X`` (the
+            state-initialisation window; 1-D for one output), for a record
+            that starts from an unknown state. The initial state is estimated
+            from them: the one whose free run fits the window best in the
+            least-squares sense
+            (an output-error fit of the ``n_states`` values, which averages
+            out white measurement noise). The whole record is simulated from
+            the estimate; score it after the window. Not together with
+            ``initial_state``. :meth:`predict_states` gives the one-step
+            predictor's (filter's) estimate instead, which follows each
+            measurement more closely.
 
         Returns
         -------
@@ -346,10 +363,9 @@ such, default=None
             Simulated response; NaN from a sample where the run diverged (a
             :class:`~sysid_nn.DivergenceWarning` says where).
         """
-        data, X0, as_list = self._prepare_call(X, None, initial_state, initial_inputs)
-        Yhat, _, diverged, _ = self._run_from(self.coefs_, data, _FREE_RUN, False, X0)
-        self._warn_divergence(diverged, as_list, stacklevel=3)
-        return self._unstack(Yhat, data, as_list, self._y_1d)
+        return self._simulate(
+            X, initial_state, "initial_state", initial_inputs, y_init=y_init
+        )
 
     def predict_states(self, X, y=None, *, initial_state=None) -> Bunch | list[Bunch]:
         """All states and the linearisation of eq. 12 along a trajectory.
@@ -461,6 +477,18 @@ default=None
                 )
             out.append(a)
         return out
+
+    def _initial_units(self):
+        rest = np.zeros(self.n_states_ - self.n_outputs_)
+        return np.r_[self._y_mean, rest], np.r_[self._y_scale, rest + 1.0]
+
+    def _initial_guess(self, y0):
+        return np.r_[y0, np.zeros(self.n_states_ - self.n_outputs_)]
+
+    def _free_run(self, data, initial):
+        X0 = self._initial_states(data, initial)
+        Yhat, _, diverged, _ = self._run_from(self.coefs_, data, _FREE_RUN, False, X0)
+        return Yhat, diverged
 
     def _initial_states(self, data: _Data, initial=None) -> np.ndarray:
         """``X0`` of every sequence: measured part from the history rows."""

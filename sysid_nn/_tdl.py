@@ -104,6 +104,11 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         Negative selection loss of every restart.
     fit_time_ : float
         Seconds spent in training.
+    output_noise_std_ : ndarray of shape (n_outputs,)
+        White measurement noise on the training outputs, estimated from the
+        records alone (residuals of a linear one-step model; an upper
+        estimate). ``fit`` warns when it swamps the outputs' second
+        difference, where the dynamics show at fine sampling.
     feature_names_in_ : ndarray
         Column names of ``X`` when it was a DataFrame.
 
@@ -186,7 +191,7 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     score = _RecurrentRegressorBase.score
 
     # -------------------------------------------------------------- public
-    def simulate(self, X, *, initial_outputs=None, initial_inputs=None):
+    def simulate(self, X, *, initial_outputs=None, initial_inputs=None, y_init=None):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
         Parameters
@@ -204,6 +209,17 @@ such, default=None
             Give it with ``initial_outputs`` to continue a record from the
             middle of the motion; only the last ``input_delay + input_lags -
             1`` rows are used.
+        y_init : array-like of shape (n_window, n_outputs), or list, default=None
+            Measured outputs over the first ``n_window`` samples of ``X`` (the
+            state-initialisation window; 1-D for one output), for a record
+            that starts from an unknown state. The initial outputs are
+            estimated from them: the ones whose free run fits the window best
+            in the least-squares sense, an output-error fit of
+            ``output_lags`` values that averages out white measurement noise
+            (measured outputs taken as ``initial_outputs`` would carry the
+            noise into the run). The
+            whole record is simulated from the estimate; score it after the
+            window. Not together with ``initial_outputs``.
 
         Returns
         -------
@@ -221,8 +237,17 @@ such, default=None
         ...                      n_init=1, random_state=0).fit(u, y)
         >>> model.simulate(u).shape
         (200,)
+
+        A record that starts in motion, its start estimated from the first
+        50 measured samples:
+
+        >>> late = model.simulate(u[100:], y_init=y[100:150])
+        >>> bool(np.allclose(late[50:], y[150:], atol=1e-3))
+        True
         """
-        return self._simulate(X, initial_outputs, "initial_outputs", initial_inputs)
+        return self._simulate(
+            X, initial_outputs, "initial_outputs", initial_inputs, y_init=y_init
+        )
 
     # ---------------------------------------------------------- structure
     def _history_length(self) -> int:
@@ -266,6 +291,13 @@ such, default=None
                 )
             out.append(a.reshape(shape))
         return out
+
+    def _initial_units(self):
+        shape = (self.output_lags, 1)
+        return np.tile(self._y_mean, shape), np.tile(self._y_scale, shape)
+
+    def _initial_guess(self, y0):
+        return np.tile(y0, (self.output_lags, 1))
 
     def _regressors(self, data: _Data) -> np.ndarray:
         """One-step regressor matrix ``phi`` of the modelled rows (measured y)."""

@@ -555,3 +555,21 @@ def test_one_step_predictor_from_noisy_records_stays_finite_on_others():
         warnings.simplefilter("error")  # no DivergenceWarning
         predictions = model.predict([X[i] for i in unseen], [y[i] for i in unseen])
     assert all(np.all(np.isfinite(p)) for p in predictions)
+
+
+def test_initial_state_estimated_from_a_measured_window():
+    X, y = _sequences(3)
+    model = ISSMRegressor(n_init=1, max_iter=10, random_state=0).fit(X, y)
+    start = [1.0, -0.5, 0.8, -0.3]
+    true = model.simulate(X[0], initial_state=start)
+    rest = model.simulate(X[0])
+    exact = model.simulate(X[0], y_init=true[:40])
+    np.testing.assert_allclose(exact, true, atol=1e-5 * np.abs(true).max())
+    noisy = true[:40] + 0.02 * true.std(axis=0) * np.random.default_rng(
+        1
+    ).standard_normal((40, 2))
+    est = model.simulate(X[0], y_init=noisy)
+    # This small system forgets its start within tens of samples: compare all.
+    assert np.abs(est - true).max() < 0.25 * np.abs(rest - true).max()
+    with pytest.raises(ValueError, match="either initial_state or y_init"):
+        model.simulate(X[0], initial_state=start, y_init=true[:40])

@@ -590,3 +590,56 @@ def test_simulation_continues_from_measured_history():
         model.simulate(Xs[0], initial_inputs=np.zeros((4, 2)))
     with pytest.raises(ValueError, match="one array per sequence"):
         model.simulate(Xs[:2], initial_inputs=[np.zeros(3)])
+
+
+def test_initial_outputs_estimated_from_a_measured_window():
+    # A record that starts in motion: the model's own free run from a known
+    # non-zero start, measured with noise over its first samples.
+    Xs, ys = _records()
+    model = _small(output_lags=2, input_lags=2).fit(Xs, ys)
+    X = Xs[1]
+    true = model.simulate(X, initial_outputs=[[1.5], [1.2]])
+    rest = model.simulate(X)
+    # Exact measurements: the start is recovered, and the whole run with it.
+    exact = model.simulate(X, y_init=true[:30])
+    np.testing.assert_allclose(exact, true, atol=1e-6 * np.abs(true).max())
+    # Noisy measurements: the run is close, far closer than from rest (this
+    # small system forgets its start within a few samples: compare them all).
+    noise = 0.02 * true.std() * np.random.default_rng(3).standard_normal(30)
+    noisy = model.simulate(X, y_init=true[:30] + noise)
+    err = np.abs(noisy - true).max()
+    assert err < 0.05 * true.std()
+    assert err < 0.1 * np.abs(rest - true).max()
+    # One window per sequence for a list; errors name the argument.
+    both = model.simulate([X, X], y_init=[true[:30], true[:10]])
+    np.testing.assert_allclose(both[0], exact)
+    with pytest.raises(ValueError, match="either initial_outputs or y_init"):
+        model.simulate(X, initial_outputs=[0.0, 0.0], y_init=true[:30])
+    with pytest.raises(ValueError, match=r"y_init must hold .* shape \(n_window, 1\)"):
+        model.simulate(X, y_init=np.zeros((30, 2)))
+    with pytest.raises(ValueError, match="y_init must hold"):
+        model.simulate(X[:5], y_init=true[:30])
+
+
+def test_output_noise_is_estimated_and_warned_about_when_it_swamps_the_dynamics():
+    # A lightly damped second-order system sampled finely (about 60 samples
+    # per period): its second difference is a small fraction of the output.
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((2000, 1))
+    y = lfilter([0.0, 1e-3], [1.0, -1.98, 0.9891], u[:, 0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        clean = _small(max_iter=2).fit(u, y)
+    assert clean.output_noise_std_[0] < 1e-6 * y.std()
+    noisy_y = y + 0.01 * y.std() * rng.standard_normal(len(y))
+    with pytest.warns(UserWarning, match=r"carry white noise of about 0.9. % of their"):
+        noisy = _small(max_iter=2).fit(u, noisy_y)
+    np.testing.assert_allclose(noisy.output_noise_std_, 0.01 * y.std(), rtol=0.2)
+
+
+def test_fit_falls_back_and_warns_when_every_free_run_diverges():
+    # Validation excitation a thousand times the training range: every
+    # restart's free run leaves the divergence bound there, the linear start too.
+    Xs, ys = _records()
+    with pytest.warns(DivergenceWarning, match="so does the linear starting model"):
+        _small().fit(Xs[:2], ys[:2], X_val=[1e3 * Xs[2]], y_val=[ys[2]])

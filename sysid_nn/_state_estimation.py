@@ -1,0 +1,85 @@
+"""Estimates of what was not measured: output noise and initial states.
+
+* :func:`noise_variance`: the white output-noise level of training records,
+  from the records alone; ``fit`` warns when it swamps the fine structure of
+  the outputs that the one-step stage reads the dynamics from.
+* :func:`fit_initial_condition`: the initial condition of a fitted model
+  whose free run best fits a measured window (``simulate(X, y_init=...)``).
+"""
+
+from __future__ import annotations
+
+from itertools import pairwise
+
+import numpy as np
+
+#: Output and input lags of the linear one-step model whose residuals give
+#: the noise level.
+_NOISE_LAGS = 3
+
+
+def _segments(starts: np.ndarray, h: int):
+    """``(first_modelled_row, end)`` of every stacked sequence."""
+    return [(a + h, b) for a, b in pairwise(starts)]
+
+
+def noise_variance(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
+    """White output-noise variance of each output column, from the data alone.
+
+    A least-squares ARX model with ``_NOISE_LAGS`` output and input lags is
+    fitted to the stacked sequences (rows ``starts[s] + h:starts[s + 1]`` of
+    sequence ``s``). With white noise ``v`` on the outputs its residual is
+    ``A(q) v`` plus the model error, so ``var(residual) / sum(a_i^2)`` is an
+    estimate of ``var(v)`` (an upper one: the model error counts as noise).
+    At fine sampling the model error of a smooth response is far below any
+    measurement noise.
+
+    Returns
+    -------
+    var : ndarray of shape (n_outputs,)
+    """
+    na = nb = _NOISE_LAGS
+    first = max(na, delay + nb - 1)
+    rows = np.concatenate(
+        [np.arange(a + first, b) for a, b in _segments(starts, h) if b - a > first]
+        or [np.empty(0, dtype=np.int64)]
+    ).astype(np.int64)
+    p = Y.shape[1]
+    if len(rows) <= (na * p + nb * U.shape[1] + 1) * 2:
+        return np.zeros(p)
+    blocks = [Y[rows - i] for i in range(1, na + 1)]
+    blocks += [U[rows - delay - j] for j in range(nb)]
+    design = np.hstack([*blocks, np.ones((len(rows), 1))])
+    theta, *_ = np.linalg.lstsq(design, Y[rows], rcond=None)
+    resid = Y[rows] - design @ theta
+    var = np.empty(p)
+    for k in range(p):
+        a = theta[k : na * p : p, k]  # own-output AR coefficients
+        var[k] = resid[:, k].var() / (1.0 + float(a @ a))
+    return var
+
+
+#: Residual given to the initial-condition fit for samples of a diverged run.
+_DIVERGED_RESIDUAL = 1e3
+
+
+def fit_initial_condition(residuals, v0: np.ndarray) -> np.ndarray:
+    """Initial condition whose free run best fits a measured window.
+
+    ``residuals(v)`` returns the free-run errors over the window started from
+    the (standardised) initial condition ``v``; NaN where the run diverged.
+    This is an output-error fit of the few initial values (consistent under
+    white output noise), solved by least squares with a finite-difference
+    Jacobian from the rest-like guess ``v0``.
+    """
+    from scipy.optimize import least_squares
+
+    def finite(v):
+        r = residuals(v)
+        return np.where(np.isfinite(r), r, _DIVERGED_RESIDUAL)
+
+    if len(finite(v0)) < len(v0):
+        # Fewer measured values than unknowns: Levenberg-Marquardt needs at
+        # least as many; the trust-region method finds a minimum-norm step.
+        return least_squares(finite, v0, method="trf").x
+    return least_squares(finite, v0, method="lm").x
