@@ -446,35 +446,55 @@ def machine_info() -> list[str]:
     ]
 
 
-def noise_section(rows: list[dict], seed: int) -> list[str]:
+def noise_section(rows: list[dict]) -> list[str]:
     """Median free-run NRMSE (and ratio to linear) against the noise level."""
     levels = sorted({r.get("noise", 0.0) for r in rows} - {0.0})
     if not levels:
         return []
     columns = [0.0, *levels]
+    seeds = sorted({r["seed"] for r in rows if r.get("noise", 0.0)})
     lines = [
-        f"## Measurement noise (P1, dt = 0.01 s, seed {seed})",
+        "## Measurement noise (dt = 0.01 s)",
         "",
         "Median free-run NRMSE on the noise-free test records (ratio to the linear "
-        "model trained on the same noisy records); noise in % of each output's "
-        "standard deviation, on the training and validation records only.",
+        "model trained on the same noisy records), then the range of fit times; noise "
+        "in % "
+        "of each output's standard deviation, on the training and validation "
+        "records only. One cell per pool seed: " + ", ".join(map(str, seeds)) + ".",
         "",
-        "| model | " + " | ".join(f"{100 * lv:g} %" for lv in columns) + " |",
-        "|" + "---|" * (len(columns) + 1),
     ]
-    for model in NOISE_MODELS:
-        found = [find(rows, seed, 0.01, "P1", model, lv) for lv in columns]
-        if all(r is None for r in found):
-            continue
-        cells = [
-            "-"
-            if r is None
-            else f"{r['free_median']:.3g}"
-            + (f" ({r['ratio']:.2g})" if "ratio" in r else "")
-            for r in found
+    for protocol in P.PROTOCOLS:
+        head = [f"{100 * lv:g} %" for lv in columns]
+        block = [
+            f"### {protocol}",
+            "",
+            "| model | " + " | ".join(head) + " | fit s |",
+            "|" + "---|" * (len(columns) + 2),
         ]
-        lines.append(f"| {MODELS[model][0]} | " + " | ".join(cells) + " |")
-    return [*lines, ""]
+        for model in NOISE_MODELS:
+            cells, times = [], []
+            for lv in columns:
+                found = [find(rows, s, 0.01, protocol, model, lv) for s in seeds]
+                cells.append(
+                    " / ".join(
+                        "-"
+                        if r is None
+                        else f"{r['free_median']:.3g}"
+                        + (f" ({r['ratio']:.2g})" if "ratio" in r else "")
+                        + (f" {r['n_divergent']} div" if r["n_divergent"] else "")
+                        for r in found
+                    )
+                )
+                times += [r["fit_s"] for r in found if r is not None]
+            if all(c.strip("- /") == "" for c in cells):
+                continue
+            span = f"{min(times):.0f}-{max(times):.0f}" if times else "-"
+            block.append(
+                f"| {MODELS[model][0]} | " + " | ".join(cells) + f" | {span} |"
+            )
+        if len(block) > 4:
+            lines += [*block, ""]
+    return lines
 
 
 def write_report(rows, args, elapsed, out_dir: Path, seeds_main) -> None:
@@ -518,7 +538,7 @@ def write_report(rows, args, elapsed, out_dir: Path, seeds_main) -> None:
                 ]
                 lines += [*table(sub), ""]
     main_seed = seeds_main
-    lines += noise_section(rows, main_seed)
+    lines += noise_section(rows)
     lines += ["## Targets", "", *targets(rows, main_seed), ""]
     rob = [r for r in rows if r["seed"] != main_seed and "free_median" in r]
     if rob:
@@ -566,8 +586,9 @@ def main(argv: list[str]) -> int:
     ap.add_argument(
         "--noise-levels",
         default=None,
-        help="measurement-noise levels for P1 at dt = 0.01, as fractions of each "
-        "output's std (default 0.0001,0.001,0.01; 'none' to skip)",
+        help="measurement-noise levels at dt = 0.01 (both protocols, seeds "
+        f"{NOISE_SEEDS}), as fractions of each output's std (default "
+        f"{','.join(map(str, NOISE_LEVELS))}; 'none' to skip)",
     )
     ap.add_argument("--out", default=None, help="output directory")
     args = ap.parse_args(argv)
@@ -609,12 +630,15 @@ def main(argv: list[str]) -> int:
         for m in ROBUSTNESS_MODELS
         if m in models
     ]
-    jobs += [
-        (args.seed, 0.01, "P1", m, lv)
-        for lv in noise_levels
+    noise_jobs = [
+        (s, 0.01, pr, m, lv)
+        for s in (NOISE_SEEDS if noise_levels else ())
+        for pr in protocols
+        for lv in [0.0, *noise_levels]
         for m in NOISE_MODELS
         if m in models
     ]
+    jobs += [j for j in noise_jobs if j not in jobs]
     pools: dict = {}
     n_test = 5 if quick else P.N_TEST
     for seed, dt, protocol, model, noise in jobs:
