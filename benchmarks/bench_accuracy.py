@@ -632,8 +632,8 @@ def main(argv: list[str]) -> int:
     ]
     noise_jobs = [
         (s, 0.01, pr, m, lv)
-        for s in (NOISE_SEEDS if noise_levels else ())
         for pr in protocols
+        for s in (NOISE_SEEDS if noise_levels else ())
         for lv in [0.0, *noise_levels]
         for m in NOISE_MODELS
         if m in models

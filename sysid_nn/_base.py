@@ -558,7 +558,7 @@ class _RecurrentRegressorBase(BaseEstimator):
             return
         # The noise's share of the second difference's spread (at most 1).
         ratio = np.sqrt(np.minimum(6.0 * var / np.maximum(d2.var(axis=0), 1e-300), 1))
-        if np.any(ratio > _NOISY_DIFFERENCE):
+        if self._noise_sensitive() and np.any(ratio > _NOISY_DIFFERENCE):
             k = int(np.argmax(ratio))
             warnings.warn(
                 f"The training outputs of {type(self).__name__} carry white noise of "
@@ -573,6 +573,10 @@ class _RecurrentRegressorBase(BaseEstimator):
                 UserWarning,
                 stacklevel=3,
             )
+
+    def _noise_sensitive(self) -> bool:
+        """Whether noise on the outputs' second difference costs this model."""
+        return True
 
     def _fallback(self, w: np.ndarray, train: _Data, val: _Data | None):
         """The linear starting model when every restart's free run diverged.
