@@ -563,13 +563,14 @@ class _RecurrentRegressorBase(BaseEstimator):
             warnings.warn(
                 f"The training outputs of {type(self).__name__} carry white noise of "
                 f"about {100 * np.sqrt(var[k]):.2g} % of their spread (output {k}; "
-                "estimated from a linear one-step model's residuals), which is "
-                f"{100 * ratio[k]:.0f} % of the spread of their second difference, "
-                "where the dynamics show at this sampling ratio. Networks trained "
-                "on such records may lose their advantage over the linear model: "
-                "measure more outputs (velocity as well as displacement, "
-                "for the ISSM), use more records, or see the user guide's "
-                "pitfalls page on noise and oversampling.",
+                "estimated from a linear one-step model's residuals, an upper "
+                "estimate: fast variation no linear model explains counts too), "
+                f"which is {100 * ratio[k]:.0f} % of the spread of their second "
+                "difference, where the dynamics show at this sampling ratio. "
+                "Networks trained on such records may lose their advantage over "
+                "the linear model: measure more outputs (velocity as well as "
+                "displacement, for the ISSM), use more records, or see the user "
+                "guide's pitfalls page on measured records.",
                 UserWarning,
                 stacklevel=3,
             )
