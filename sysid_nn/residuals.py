@@ -106,6 +106,26 @@ def _check_settings(max_lag: Any, alpha: Any, residuals: list[np.ndarray]) -> fl
     return float(stats.norm.ppf(1 - alpha / 2))
 
 
+class _WholeFrame(pd.DataFrame):
+    """A DataFrame that prints whole, whatever pandas' display options.
+
+    Test summaries are short and every column matters (test, statistic,
+    dof, p-value, verdict): ``print(summary)`` must not elide rows or
+    columns to fit a terminal. Everything else is pandas' DataFrame;
+    ``pd.DataFrame(summary)`` gives a plain one.
+    """
+
+    @property
+    def _constructor(self):
+        return _WholeFrame
+
+    def __repr__(self) -> str:
+        return self.to_string()
+
+    def _repr_html_(self) -> str:
+        return self.to_html()
+
+
 # ----------------------------------------------------------------------------
 # Pooled correlations and the chi-square statistic
 # ----------------------------------------------------------------------------
@@ -513,7 +533,7 @@ class CrossCorrelationResult:
             )
             for t in tests
         ]
-        return pd.DataFrame(rows).sort_values(["input", "side"], ignore_index=True)
+        return _WholeFrame(rows).sort_values(["input", "side"], ignore_index=True)
 
     def to_frame(self) -> pd.DataFrame:
         """Return the cross-correlation of every input with its band.
@@ -696,7 +716,7 @@ class NonlinearTestResult:
     @property
     def summary(self) -> pd.DataFrame:
         """One row per test and input: chi-square result and band counts."""
-        return pd.DataFrame(
+        return _WholeFrame(
             [
                 {
                     "test": t.name,
@@ -839,8 +859,11 @@ class ResidualAnalysis:
     summary : pandas.DataFrame
         One row per sequence (then ``"pooled"``) x output x input x test with
         columns ``sequence, output, input, test, statistic, dof, p_value,
-        passed, n_samples, status``; ``status`` is ``"ok"`` or
-        ``"divergent"`` (NaN statistics, ``passed=False``).
+        passed, n_samples, status``; ``passed`` is the verdict, ``status`` is
+        ``"ok"`` or ``"divergent"`` (NaN statistics, ``passed=False``).
+        ``print(summary)`` shows every row and column whatever pandas'
+        display options (frames derived from it too);
+        ``pd.DataFrame(summary)`` is a plain DataFrame.
     divergent : tuple of int
         Sequences whose residuals contain NaN (excluded from the pooled tests).
     mode : str
@@ -1127,7 +1150,7 @@ def analyze_residuals(
                     nl = nonlinear_correlation_tests(e, u, max_lag, alpha)
                     nonlin[seq, out] = nl
             rows.extend(_summary_rows(seq, out, (w, c, nl), dofs, n_in, n_samples))
-    summary = pd.DataFrame(rows, columns=_SUMMARY_COLUMNS)
+    summary = _WholeFrame(rows, columns=_SUMMARY_COLUMNS)
     return ResidualAnalysis(
         residuals=residuals,
         whiteness=whiteness,
