@@ -31,6 +31,8 @@ from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
+from sysid_nn._validation import check_same_width
+
 __all__ = ["DivergenceWarning"]
 
 #: A free run whose standardised output exceeds this multiple of the largest
@@ -213,6 +215,18 @@ def _naming_sequence(where: str, as_list: bool):
         raise
 
 
+def _float_array(a, name: str, where: str, as_list: bool) -> np.ndarray:
+    """``a`` as a float64 array of any dimension; errors name the sequence."""
+    with _naming_sequence(where, as_list):
+        return check_array(
+            a,
+            dtype=np.float64,
+            ensure_2d=False,
+            ensure_all_finite=False,
+            input_name=name,
+        )
+
+
 def _check_finite(a: np.ndarray, name: str, index: int | None, as_list: bool) -> None:
     bad = ~np.isfinite(a)
     if bad.any():
@@ -338,14 +352,7 @@ class _RecurrentRegressorBase(BaseEstimator):
         Xs, ys, y_1d = [], [], None
         for i, Xi in enumerate(X_list):
             where = f"X[{i}]" if as_list else "X"
-            with _naming_sequence(where, as_list):
-                arr = check_array(
-                    Xi,
-                    dtype=np.float64,
-                    ensure_2d=False,
-                    ensure_all_finite=False,
-                    input_name="X",
-                )
+            arr = _float_array(Xi, "X", where, as_list)
             if arr.ndim == 1:
                 # scikit-learn's message prints the whole array and suggests
                 # reshape(1, -1), which would make a record one time step.
@@ -362,14 +369,7 @@ class _RecurrentRegressorBase(BaseEstimator):
             _check_finite(Xi, "X", i, as_list)
             Xs.append(Xi)
             if y is not None:
-                yi = y_list[i]
-                yi = check_array(
-                    yi,
-                    dtype=np.float64,
-                    ensure_2d=False,
-                    ensure_all_finite=False,
-                    input_name="y",
-                )
+                yi = _float_array(y_list[i], "y", f"y[{i}]", as_list)
                 if yi.ndim not in (1, 2):
                     raise ValueError(
                         f"y must be 1-D (n_samples,) or 2-D (n_samples, n_outputs); "
@@ -387,13 +387,7 @@ class _RecurrentRegressorBase(BaseEstimator):
                         f"{len(Xi)} and {len(yi)}."
                     )
                 ys.append(yi)
-        n_features = {Xi.shape[1] for Xi in Xs}
-        if len(n_features) > 1:
-            raise ValueError(
-                f"All sequences of X must have the same number of features; got "
-                f"{sorted(n_features)}."
-            )
-        n_features = n_features.pop()
+        n_features = check_same_width(Xs, "X", "features")
         if reset:
             self.n_features_in_ = n_features
         elif n_features != self.n_features_in_:
@@ -402,15 +396,10 @@ class _RecurrentRegressorBase(BaseEstimator):
                 f"{self.n_features_in_} features as input."
             )
         if ys:
-            n_outputs = {yi.shape[1] for yi in ys}
-            if len(n_outputs) > 1:
+            n_outputs = check_same_width(ys, "y", "outputs")
+            if not reset and n_outputs != self.n_outputs_:
                 raise ValueError(
-                    f"All sequences of y must have the same number of outputs; got "
-                    f"{sorted(n_outputs)}."
-                )
-            if not reset and ys[0].shape[1] != self.n_outputs_:
-                raise ValueError(
-                    f"y has {ys[0].shape[1]} outputs, but {name} was fitted with "
+                    f"y has {n_outputs} outputs, but {name} was fitted with "
                     f"{self.n_outputs_}."
                 )
         return Xs, (ys if y is not None else None), as_list, bool(y_1d)
