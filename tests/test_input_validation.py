@@ -8,6 +8,7 @@ import warnings
 import numpy as np
 import pandas as pd
 import pytest
+from sklearn.base import clone
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils.estimator_checks import check_dataframe_column_names_consistency
 
@@ -197,12 +198,11 @@ def test_issm_state_estimates_check_names():
 # --------------------------------------------------------------------------
 # structure and call arguments
 # --------------------------------------------------------------------------
-@pytest.mark.parametrize("cls", [TDLRegressor, ISSMRegressor])
-def test_an_int_hidden_layer_size_is_one_layer(cls):
+@ESTIMATORS
+def test_an_int_hidden_layer_size_is_one_layer(est):
     u, y = _record()
-    params = {**SMALL, "hidden_layer_sizes": 5}
-    as_int = cls(**params).fit(u, y)
-    as_tuple = cls(**{**params, "hidden_layer_sizes": (5,)}).fit(u, y)
+    as_int = clone(est).set_params(hidden_layer_sizes=5).fit(u, y)
+    as_tuple = clone(est).set_params(hidden_layer_sizes=(5,)).fit(u, y)
     assert as_int._sizes_.tolist() == as_tuple._sizes_.tolist()
     np.testing.assert_array_equal(as_int.coefs_, as_tuple.coefs_)
 
