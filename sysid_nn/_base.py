@@ -842,25 +842,28 @@ default=None
 
 
 def _mean_scale(a: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and standard deviation of every column, for standardising.
+    """Mean and scale of every column, for standardising.
 
-    A column whose variance overflows float64, or whose variation is too
-    small for float64 to square, cannot be standardised: the network would
-    be all NaN or blind to it. Both raise a ValueError naming ``name``.
-    Constant columns (variance within the rounding error of the mean, the
-    rule of scikit-learn's ``StandardScaler``) are left unscaled.
+    Computed on the columns divided by a power of two above their peak, which
+    is exact and safe from over- and underflow. A varying column whose
+    squared deviations overflow float64 when summed, or underflow, cannot be
+    standardised (the network and every score would be NaN, or blind to it):
+    both raise a ValueError naming ``name``. A constant column (variance
+    within the rounding error of the mean, the rule of scikit-learn's
+    ``StandardScaler``) is divided by its level where that exceeds 1, so
+    that its rounding noise stays negligible, and left unscaled otherwise.
     """
     peak = np.max(np.abs(a), axis=0)
-    with np.errstate(all="ignore"):
-        mean, var = a.mean(axis=0), a.var(axis=0)
-        # The constant test on the data divided by its peak: scale-free and
-        # safe from over- and underflow.
-        rel = a / np.where(peak > 0, peak, 1.0)
-        rel_mean, rel_var = rel.mean(axis=0), rel.var(axis=0)
+    unit = np.ldexp(1.0, np.frexp(peak)[1])
+    rel = a / unit
+    rel_mean, rel_var = rel.mean(axis=0), rel.var(axis=0)
     n, eps = len(a), np.finfo(np.float64).eps
     constant = rel_var <= n * eps * rel_var + (n * eps * rel_mean) ** 2
-    overflow = ~(np.isfinite(mean) & np.isfinite(var))
-    underflow = ~constant & (var < np.finfo(np.float64).tiny)
+    mean, scale = unit * rel_mean, unit * np.sqrt(rel_var)
+    with np.errstate(over="ignore", under="ignore"):
+        squares = scale**2
+    overflow = ~constant & ~np.isfinite(n * squares)
+    underflow = ~constant & (squares < np.finfo(np.float64).tiny)
     for bad, problem in (
         (overflow, "reaches {:.3g}: its variance overflows float64"),
         (underflow, "varies by only {:.3g}: float64 cannot square that"),
@@ -873,8 +876,7 @@ def _mean_scale(a: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
                 f"{problem.format(size)}. Rescale {name} (e.g. express it in "
                 "other units) before fitting."
             )
-    scale = np.sqrt(var)
-    scale[constant] = 1.0
+    scale[constant] = np.maximum(1.0, peak[constant])
     return mean, scale
 
 

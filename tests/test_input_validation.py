@@ -130,6 +130,22 @@ def test_models_are_unit_free_over_the_usable_range(factor):
 
 
 @ESTIMATORS
+def test_an_offset_channel_with_rounding_noise_is_a_constant(est):
+    # A channel at a level of 1e6 that varies only in its last bits: left
+    # unscaled, its rounding noise made the ISSM's linear start diverge.
+    u, y = _record()
+    bits = 1.0 + 4e-16 * np.random.default_rng(3).integers(0, 3, (len(u), 1))
+    ones = clone(est).fit(np.hstack([u, np.ones_like(u)]), y)
+    offset = clone(est).fit(np.hstack([u, 1e6 * bits]), y)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        reference = ones.predict(np.hstack([u, np.ones_like(u)]))
+        np.testing.assert_allclose(
+            offset.predict(np.hstack([u, 1e6 * bits])), reference, rtol=1e-6, atol=1e-9
+        )
+
+
+@ESTIMATORS
 def test_constant_channels_stay_finite(est):
     u, y = _record()
     flat = np.hstack([u, np.full_like(u, 3.0)])
@@ -137,6 +153,9 @@ def test_constant_channels_stay_finite(est):
     np.testing.assert_allclose(est.predict(flat), 2.0)
     est.fit(np.zeros_like(u), y)
     assert np.all(np.isfinite(est.predict(np.zeros_like(u))))
+    # A constant far beyond where its square overflows is still a constant.
+    est.fit(u, np.full_like(y, 1e300))
+    np.testing.assert_allclose(est.predict(u), 1e300)
 
 
 # --------------------------------------------------------------------------
