@@ -844,7 +844,7 @@ default=None
 def _mean_scale(a: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
     """Mean and scale of every column, for standardising.
 
-    Computed on the columns divided by a power of two above their peak, which
+    Computed on the columns divided by a power of two near their peak, which
     is exact and safe from over- and underflow. A varying column whose
     squared deviations overflow float64 when summed, or underflow, cannot be
     standardised (the network and every score would be NaN, or blind to it):
@@ -854,15 +854,16 @@ def _mean_scale(a: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
     that its rounding noise stays negligible, and left unscaled otherwise.
     """
     peak = np.max(np.abs(a), axis=0)
-    unit = np.ldexp(1.0, np.frexp(peak)[1])
+    # At most the peak, so that it is finite; |a / unit| < 2.
+    unit = np.ldexp(1.0, np.frexp(peak)[1] - 1)
     rel = a / unit
     rel_mean, rel_var = rel.mean(axis=0), rel.var(axis=0)
     n, eps = len(a), np.finfo(np.float64).eps
     constant = rel_var <= n * eps * rel_var + (n * eps * rel_mean) ** 2
-    mean, scale = unit * rel_mean, unit * np.sqrt(rel_var)
     with np.errstate(over="ignore", under="ignore"):
+        mean, scale = unit * rel_mean, unit * np.sqrt(rel_var)
         squares = scale**2
-    overflow = ~constant & ~np.isfinite(n * squares)
+        overflow = ~constant & ~np.isfinite(n * squares)
     underflow = ~constant & (squares < np.finfo(np.float64).tiny)
     for bad, problem in (
         (overflow, "reaches {:.3g}: its variance overflows float64"),
