@@ -65,7 +65,9 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Every default in ``--help``; options without one say what happens."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        if action.default in (None, False) or "default" in (action.help or ""):
+        if action.default is None or action.default is False:
+            return action.help
+        if "default" in (action.help or ""):
             return action.help
         return super()._get_help_string(action)
 
@@ -457,19 +459,57 @@ def _check_columns(
         seen[column] = option
 
 
+# One line for the command list, a paragraph for the command's --help.
+_ABOUT = {
+    "generate": (
+        "simulate records of the hysteretic oscillator (paper section 4.1)",
+        "Simulate the Bouc-Wen oscillator under the paper's modulated "
+        "Kanai-Tajimi excitation and write a tidy table with columns "
+        "realization, t, excitation, displacement, velocity, hysteretic. "
+        "Fit or validate on it with --split-by realization.",
+    ),
+    "reproduce": (
+        "run the paper's section-4 study and write figures, tables, report",
+        "Generate seeded training, validation and test records of the "
+        "hysteretic oscillator, fit the paper's TDL and ISSM networks, the "
+        "linear baseline and the toolbox's defaults, evaluate one-step "
+        "prediction and free-run simulation on unseen realisations and "
+        "write figs 4.1-4.7, a hysteresis plot, results.csv, summary.csv "
+        "and report.md into --out.",
+    ),
+    "fit": (
+        "fit a TDL or ISSM network to measured records and save it",
+        "Fit a recurrent network to your own records: named excitation "
+        "(--input) and response (--output) columns of CSV or parquet "
+        "files, one experiment per file (or per --split-by group). The "
+        "fitted model is saved with joblib for `sysid-nn validate`. The "
+        "closing line scores the model on held-out records.",
+    ),
+    "validate": (
+        "residual tests, error statistics and figures of a saved model",
+        "Run a model saved by `sysid-nn fit` on validation records: "
+        "one-step prediction and free-run simulation, residual tests, "
+        "eq. 19-20 statistics, figures and report.md in --out; the "
+        "scores of every output are printed under its column name.",
+    ),
+}
+
+
+def _command(
+    sub: argparse._SubParsersAction, name: str, run: Callable[[argparse.Namespace], int]
+) -> argparse.ArgumentParser:
+    """The sub-parser of command ``name``, run by ``run``."""
+    summary, description = _ABOUT[name]
+    p = sub.add_parser(
+        name, help=summary, description=description, formatter_class=_HelpFormatter
+    )
+    p.set_defaults(func=run)
+    return p
+
+
 # ---------------------------------------------------------------- generate
 def _add_generate(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "generate",
-        help="simulate records of the hysteretic oscillator (paper section 4.1)",
-        formatter_class=_HelpFormatter,
-        description=(
-            "Simulate the Bouc-Wen oscillator under the paper's modulated "
-            "Kanai-Tajimi excitation and write a tidy table with columns "
-            "realization, t, excitation, displacement, velocity, hysteretic. "
-            "Fit or validate on it with --split-by realization."
-        ),
-    )
+    p = _command(sub, "generate", _run_generate)
     p.add_argument(
         "--n-realizations", type=_positive_int, default=25, metavar="N", help="records"
     )
@@ -494,7 +534,6 @@ def _add_generate(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--overwrite", action="store_true", help="replace an existing --out file"
     )
-    p.set_defaults(func=_run_generate)
 
 
 def _run_generate(args: argparse.Namespace) -> int:
@@ -532,19 +571,7 @@ _OPTION_OF_FIELD = {
 
 
 def _add_reproduce(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "reproduce",
-        help="run the paper's section-4 study and write figures, tables, report",
-        formatter_class=_HelpFormatter,
-        description=(
-            "Generate seeded training, validation and test records of the "
-            "hysteretic oscillator, fit the paper's TDL and ISSM networks, the "
-            "linear baseline and the toolbox's defaults, evaluate one-step "
-            "prediction and free-run simulation on unseen realisations and "
-            "write figs 4.1-4.7, a hysteresis plot, results.csv, summary.csv "
-            "and report.md into --out."
-        ),
-    )
+    p = _command(sub, "reproduce", _run_reproduce)
     p.add_argument(
         "--out",
         type=Path,
@@ -583,7 +610,6 @@ def _add_reproduce(sub: argparse._SubParsersAction) -> None:
         "extra; default: local joblib)",
     )
     _add_output_flags(p, "--out directory")
-    p.set_defaults(func=_run_reproduce)
 
 
 def _study_config(args: argparse.Namespace):
@@ -640,18 +666,7 @@ _MODELS = ("tdl", "issm")
 
 
 def _add_fit(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "fit",
-        help="fit a TDL or ISSM network to measured records and save it",
-        formatter_class=_HelpFormatter,
-        description=(
-            "Fit a recurrent network to your own records: named excitation "
-            "(--input) and response (--output) columns of CSV or parquet "
-            "files, one experiment per file (or per --split-by group). The "
-            "fitted model is saved with joblib for `sysid-nn validate`. The "
-            "closing line scores the model on held-out records."
-        ),
-    )
+    p = _command(sub, "fit", _run_fit)
     _data_arguments(p)
     p.add_argument(
         "--input",
@@ -690,12 +705,22 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
         "(default for this and the options below: the estimator's own, see "
         "TDLRegressor and ISSMRegressor)",
     )
-    p.add_argument("--output-lags", type=_positive_int, default=None, metavar="N")
-    p.add_argument("--input-lags", type=_positive_int, default=None, metavar="N")
-    p.add_argument("--n-states", type=_positive_int, default=None, metavar="N")
-    p.add_argument("--focus", choices=("simulation", "prediction"), default=None)
-    p.add_argument("--n-init", type=_positive_int, default=None, metavar="N")
-    p.add_argument("--max-iter", type=_positive_int, default=None, metavar="N")
+    for option, about in (
+        ("--output-lags", "past outputs fed back (tdl)"),
+        ("--input-lags", "past inputs seen (tdl)"),
+        ("--n-states", "states, at least one per output (issm)"),
+        ("--n-init", "random restarts, the best kept"),
+        ("--max-iter", "iterations per training stage"),
+    ):
+        p.add_argument(
+            option, type=_positive_int, default=None, metavar="N", help=about
+        )
+    p.add_argument(
+        "--focus",
+        choices=("simulation", "prediction"),
+        default=None,
+        help="free-run or one-step errors minimised",
+    )
     p.add_argument("--seed", type=_seed, default=0, help="random seed")
     _add_parallel(p)
     p.add_argument(
@@ -719,7 +744,6 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
         help="one line per restart and training stage with its losses, also on "
         "a terminal (default: a progress bar there, these lines elsewhere)",
     )
-    p.set_defaults(func=_run_fit)
 
 
 def _estimator(args: argparse.Namespace):
@@ -890,17 +914,7 @@ def _fit(estimator, X, y, X_val, y_val, origins, inputs, outputs) -> None:
 
 
 def _add_validate(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser(
-        "validate",
-        help="residual tests, error statistics and figures of a saved model",
-        formatter_class=_HelpFormatter,
-        description=(
-            "Run a model saved by `sysid-nn fit` on validation records: "
-            "one-step prediction and free-run simulation, residual tests, "
-            "eq. 19-20 statistics, figures and report.md in --out; the "
-            "scores of every output are printed under its column name."
-        ),
-    )
+    p = _command(sub, "validate", _run_validate)
     p.add_argument(
         "--model",
         type=Path,
@@ -926,7 +940,6 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
     )
     _add_parallel(p)
     _add_output_flags(p, "--out directory")
-    p.set_defaults(func=_run_validate)
 
 
 def _load_model(path: Path):

@@ -197,7 +197,10 @@ def test_help_shows_every_default(capsys):
             parser.parse_args([command, "--help"])
         text = " ".join(capsys.readouterr().out.split())
         for action in commands[command]._actions:
-            if action.default not in (None, False, "==SUPPRESS==", []):
+            if (
+                action.default not in (None, "==SUPPRESS==", [])
+                and action.default is not False
+            ):
                 assert f"default: {action.default}" in text, (command, action.dest)
     with pytest.raises(SystemExit):
         parser.parse_args(["fit", "--help"])
