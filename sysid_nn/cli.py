@@ -402,13 +402,15 @@ def _read_records(
     return records
 
 
-def _resolve_dt(given: float | None, records: _Records, fallback=None) -> float:
-    """dt from ``--dt`` and the files' time column, which must agree."""
+def _resolve_dt(
+    given: float | None, records: _Records, fallback=None, source: str = "--dt"
+) -> float:
+    """dt from ``--dt`` (or ``source``) and the files' times, which must agree."""
     found = records.dt
     if given is not None and found is not None:
         if abs(given - found) > _DT_TOLERANCE * found:
             raise _InputError(
-                f"--dt {given:g} disagrees with the sample times in "
+                f"{source} {given:g} disagrees with the sample times in "
                 f"{records.dt_origin} (dt = {found:g} s); leave --dt out, or pass "
                 "--time-column none to ignore the files' times."
             )
@@ -841,7 +843,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     val = _read_records(args.val, [*inputs, *outputs], *read) if args.val else None
     dt = _resolve_dt(args.dt, records)
     if val is not None:
-        _resolve_dt(dt, val)
+        _resolve_dt(dt, val, source="the training files' dt")
     label = f"{args.model.upper()} ({', '.join(f'{k}={v}' for k, v in params.items())})"
     model = StudyModel(
         label if params else args.model.upper(), estimator, inputs, outputs
@@ -863,13 +865,16 @@ def _run_fit(args: argparse.Namespace) -> int:
         if X_val is not None:
             scores = _scores(estimator, X_val, y_val)
             where = f"{len(X_val)} held-out experiment(s) ({', '.join(held_names)})"
-        else:
+        elif estimator.best_validation_score_ is not None:
             share = estimator.get_params()["validation_fraction"]
             scores = _scores(estimator, X, y, tail=share)
             where = (
                 f"the held-out last {share:.0%} of {records.origins[0]} (free run "
                 "from the record's start)"
             )
+        else:  # too short to hold anything out: say so, score what there is
+            scores = _scores(estimator, X, y)
+            where = "nothing (the record is too short to hold a part out)"
     # One line per distinct warning, not Python's two-line source excerpt.
     for message in dict.fromkeys(str(w.message).splitlines()[0] for w in caught):
         print(f"{_PROG}: warning: {message}", file=sys.stderr)
@@ -890,7 +895,12 @@ def _run_fit(args: argparse.Namespace) -> int:
     print(
         f"fitted {model.label} in {estimator.fit_time_:.1f} s: trained on "
         f"{len(X_fit)} experiment(s), validated on {where} (dt = {dt:g} s); "
-        f"saved to {args.save}. Held-out scores:"
+        f"saved to {args.save}. "
+        + (
+            "Held-out scores:"
+            if estimator.best_validation_score_ is not None
+            else "Scores on the training data:"
+        )
     )
     print("\n".join(_score_lines(scores, outputs, units)))
     return 0
@@ -1099,8 +1109,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         # The API's messages name the argument and the fix: one line, no traceback.
         _fail(exc)
         return 2
-    except FileExistsError as exc:  # another process created --out meanwhile
-        return _fail(f"{exc.filename or args.out} exists; pass --overwrite.")
+    except FileExistsError as exc:  # another process created the output meanwhile
+        return _fail(f"{exc.filename or 'the output'} exists; pass --overwrite.")
     except OSError as exc:
         where = f" {exc.filename}" if exc.filename else ""
         return _fail(f"cannot write{where}: {_reason(exc)}")
