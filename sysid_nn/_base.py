@@ -11,6 +11,7 @@ its kernels, the initial parameters, and the kernels themselves.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import numbers
 import textwrap
@@ -32,6 +33,8 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
 from sysid_nn._validation import check_same_width
+
+from sysid_nn._progress import report_stage
 
 __all__ = ["DivergenceWarning"]
 
@@ -657,13 +660,15 @@ class _RecurrentRegressorBase(BaseEstimator):
             n_iter += nit
             if last:
                 converged = ok or tracker.stopped
-            if self.verbose:
-                print(
-                    f"[{type(self).__name__}] restart {k} stage {i_stage} "
-                    f"(segment {'free run' if seg == _FREE_RUN else seg}): "
-                    f"{nit} iterations, loss {objective.loss(w):.3e}, "
-                    f"validation {tracker.best_loss:.3e}"
-                )
+            report_stage(
+                self,
+                (k, self._n_restarts()),
+                (i_stage, len(stages)),
+                f"segment {'free run' if seg == _FREE_RUN else seg}",
+                nit,
+                functools.partial(objective.loss, w),
+                tracker.best_loss,
+            )
         if val is not None:
             w = tracker.best_w
             val_loss = tracker.best_loss
