@@ -356,3 +356,13 @@ def test_fit_writes_nothing_to_stdout_but_results(files, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "restart" not in out
     assert np.all(["NRMSE" in line or "fitted" in line for line in out.splitlines()])
+
+
+def test_data_the_estimator_rejects_names_the_file(files, tmp_path, capsys):
+    short = tmp_path / "short.csv"
+    pd.read_csv(files[0]).head(8).to_csv(short, index=False)
+    assert _fit([short], tmp_path / "m.joblib", "--output-lags", "10") == 1
+    line = _error(capsys)
+    assert "cannot fit to" in line and "short.csv" in line
+    assert "outputs 'displacement'" in line and "at least" in line
+    assert not (tmp_path / "m.joblib").exists()
