@@ -861,7 +861,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     X_fit, y_fit = [X[j] for j in train], [y[j] for j in train]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        _fit(estimator, X_fit, y_fit, X_val, y_val, records.origins, inputs, outputs)
+        _fit(estimator, X_fit, y_fit, X_val, y_val, sources, inputs, outputs)
         if X_val is not None:
             scores = _scores(estimator, X_val, y_val)
             where = f"{len(X_val)} held-out experiment(s) ({', '.join(held_names)})"
@@ -906,7 +906,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fit(estimator, X, y, X_val, y_val, origins, inputs, outputs) -> None:
+def _fit(estimator, X, y, X_val, y_val, files, inputs, outputs) -> None:
     """``estimator.fit``; an error about the data names the files and columns."""
     try:
         estimator.fit(X, y, X_val=X_val, y_val=y_val)
@@ -915,9 +915,8 @@ def _fit(estimator, X, y, X_val, y_val, origins, inputs, outputs) -> None:
         first = re.split(r"\W", str(exc), maxsplit=1)[0]
         if isinstance(exc, TypeError) or first in estimator.get_params():
             raise
-        files = dict.fromkeys(o.split(" (")[0] for o in origins)
         raise _InputError(
-            f"cannot fit to {', '.join(files)}"
+            f"cannot fit to {', '.join(map(str, files))}"
             f" (inputs {', '.join(map(repr, inputs))}, outputs "
             f"{', '.join(map(repr, outputs))}): {_one_line(exc)}"
         ) from None

@@ -3,7 +3,6 @@ sample times, columns, units, progress and exit statuses."""
 
 import argparse
 import io
-import os
 
 import joblib
 import numpy as np
@@ -105,19 +104,13 @@ def test_generate_needs_overwrite_and_writes_atomically(tmp_path, capsys, monkey
 
 
 def test_unwritable_save_is_refused_before_fitting(files, tmp_path, capsys):
-    assert _fit(files[:2], tmp_path / "no_such_dir" / "m.joblib") == 1
-    # One line: the error, before any training progress.
-    assert "cannot write" in _error(capsys)
-    read_only = tmp_path / "ro"
-    read_only.mkdir()
-    read_only.chmod(0o500)
-    try:
-        if os.access(read_only, os.W_OK):  # root ignores permissions
-            return
-        assert _fit(files[:2], read_only / "m.joblib") == 1
-        assert "Permission denied" in _error(capsys)
-    finally:
-        read_only.chmod(0o700)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    for save in (tmp_path / "no_such_dir" / "m.joblib", blocker / "m.joblib"):
+        assert _fit(files[:2], save) == 1
+        # One line: the error, and no training progress before it.
+        line = _error(capsys)
+        assert "cannot write" in line and str(save) in line
 
 
 def test_validate_out_never_replaces_inputs_or_foreign_folders(files, tmp_path, capsys):
@@ -363,3 +356,13 @@ def test_fit_writes_nothing_to_stdout_but_results(files, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "restart" not in out
     assert np.all(["NRMSE" in line or "fitted" in line for line in out.splitlines()])
+
+
+def test_data_the_estimator_rejects_names_the_file(files, tmp_path, capsys):
+    short = tmp_path / "short.csv"
+    pd.read_csv(files[0]).head(8).to_csv(short, index=False)
+    assert _fit([short], tmp_path / "m.joblib", "--output-lags", "10") == 1
+    line = _error(capsys)
+    assert "cannot fit to" in line and "short.csv" in line
+    assert "outputs 'displacement'" in line and "at least" in line
+    assert not (tmp_path / "m.joblib").exists()
