@@ -160,7 +160,7 @@ def test_existing_output_is_kept_unless_overwrite(tmp_path):
 
 
 def test_failed_run_leaves_nothing(tmp_path, monkeypatch):
-    import sysid_nn.study as study_module
+    import sysid_nn.study._run as study_module
 
     def boom(*args, **kwargs):
         raise RuntimeError("interrupted")
@@ -232,7 +232,8 @@ def test_select_typical():
 
 
 def test_hysteretic_element_reproduces_true_state_from_displacement(study):
-    from sysid_nn.study import _hysteretic_state, hysteresis_loops
+    from sysid_nn.study import hysteresis_loops
+    from sysid_nn.study._figures import _hysteretic_state
 
     test = study.data.test
     z = _hysteretic_state(test.displacement[0], study.data.oscillator)

@@ -1,0 +1,240 @@
+"""The study's figures (figs 4.1-4.7 and the hysteresis loops)."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+from sklearn.utils import Bunch
+
+from sysid_nn.plotting import panel_figure
+from sysid_nn.study._models import StudyModel
+
+
+def _model_grid(model: StudyModel, n: int, dt: float) -> np.ndarray:
+    return np.arange(n) * dt * model.step
+
+
+def _response_figure(models, data, evaluation, mode, title) -> Any:
+    from sysid_nn.plotting import plot_response
+
+    fig, axes = panel_figure(len(models))
+    for ax, (name, model) in zip(axes, models.items(), strict=True):
+        (_,), (y,) = model.arrays(data.test, [0])
+        y0 = y if y.ndim == 1 else y[:, 0]
+        e = evaluation.errors[name, mode][0]
+        t = _model_grid(model, y0.size, data.dt)
+        plot_response(t, y0, y0 - e, label=model.label, ax=ax)
+        ax.set_title(f"{title}: {model.label}, test realisation 0", fontsize=9)
+    return fig
+
+
+def _correlation_figure(models, data, evaluation, kind) -> Any:
+    from sysid_nn.plotting import plot_autocorrelation, plot_cross_correlation
+
+    plot, results = {
+        "acf": (plot_autocorrelation, "whiteness"),
+        "ccf": (plot_cross_correlation, "cross_correlation"),
+    }[kind]
+    fig, axes = panel_figure(len(models))
+    for ax, (name, model) in zip(axes, models.items(), strict=True):
+        analysis = evaluation.analyses[name, "prediction"]
+        found = getattr(analysis, results).get((0, 0))
+        if found is None:
+            ax.text(0.5, 0.5, f"{model.label}: prediction diverged", ha="center")
+            continue
+        plot(found, dt=data.dt * model.step, title=model.label, ax=ax)
+    return fig
+
+
+def _statistics_figure(evaluation, mode, title) -> Any:
+    from sysid_nn.plotting import plot_error_statistics
+
+    fig, (ax,) = panel_figure(1, row_height=3.6)
+    plot_error_statistics(evaluation.statistics[mode], title=title, ax=ax)
+    return fig
+
+
+def _hysteretic_state(x: np.ndarray, osc: Any, substeps: int = 4) -> np.ndarray:
+    """Bouc-Wen state ``Z`` (eq. 15) driven by a displacement history from rest.
+
+    Eq. 15 is rate-independent (``dZ/dX`` depends on ``Z`` and the sign of
+    ``dX`` only), so the true hysteretic element can follow any displacement
+    history, a model's simulation included; integrated in ``X`` by RK4 on
+    ``substeps`` pieces of every sample step.
+    """
+    p = osc.get_params()
+    beta, gamma, n = (
+        p["beta"] / p["z0"] ** p["n"],
+        p["gamma"] / p["z0"] ** p["n"],
+        p["n"],
+    )
+
+    def slope(z: float, dx: float) -> float:
+        s = dx * z
+        sign = 1.0 if s > 0 else (-1.0 if s < 0 else 0.0)
+        return 1.0 - (beta * sign + gamma) * abs(z) ** n
+
+    z = np.zeros(x.size)
+    for k in range(1, x.size):
+        h, zk = (x[k] - x[k - 1]) / substeps, z[k - 1]
+        for _ in range(substeps):
+            k1 = slope(zk, h)
+            k2 = slope(zk + 0.5 * h * k1, h)
+            k3 = slope(zk + 0.5 * h * k2, h)
+            k4 = slope(zk + h * k3, h)
+            zk += h * (k1 + 2 * k2 + 2 * k3 + k4) / 6
+        z[k] = zk
+    return z
+
+
+def hysteresis_loops(
+    models: Mapping[str, StudyModel], data: Bunch, evaluation: Bunch
+) -> Bunch:
+    """Restoring force and hysteretic state against displacement, test record 0.
+
+    The truth is ``g = alpha X + (1 - alpha) Z`` (eq. 14) against ``X``. Each
+    model is drawn along its simulated displacement ``X_m``: the restoring
+    force ``alpha X_m + (1 - alpha) Z(X_m)`` that the true hysteretic element
+    (eq. 15, rate-independent) develops under that displacement history, so
+    loops compare at a glance whatever the model's sampling step. Models
+    with unmeasured states (the ISSMs) are also drawn by their estimated
+    states, mapped onto ``Z`` by least squares (the states' coordinates are
+    the network's own; ``|r|`` says how well they track ``Z``).
+
+    Parameters
+    ----------
+    models : dict of str to StudyModel
+        The fitted models, e.g. from :func:`fit_models`.
+    data : Bunch
+        From :func:`generate_data`.
+    evaluation : Bunch
+        From :func:`evaluate`.
+
+    Returns
+    -------
+    Bunch
+        ``truth``: ``(X, g, Z)``; ``force``: ``{label: (X_m, g_m)}``;
+        ``state``: ``{label: (X_m, Z_m)}`` for models with states;
+        ``state_correlation``: ``{label: |r|}`` of ``Z_m`` and ``Z``.
+
+    Examples
+    --------
+    >>> from sysid_nn.study import (
+    ...     StudyConfig,
+    ...     evaluate,
+    ...     fit_models,
+    ...     generate_data,
+    ...     hysteresis_loops,
+    ... )
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
+    ...                      n_candidates=3, max_lag=10,
+    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> data = generate_data(config)
+    >>> models = fit_models(data, config)
+    >>> loops = hysteresis_loops(models, data, evaluate(models, data, config))
+    >>> sorted(loops.force), loops.state
+    (['linear (OE)'], {})
+    """
+    alpha = data.oscillator.get_params()["alpha"]
+    x, z = data.test.displacement[0], data.test.hysteretic[0]
+    out = Bunch(truth=(x, alpha * x + (1 - alpha) * z, z), force={}, state={})
+    out.state_correlation = {}
+    for name, model in models.items():
+        (X,), _ = model.arrays(data.test, [0])
+        cut = slice(None, None, model.step)
+        e = evaluation.errors[name, "simulation"][0]
+        x_m = x[cut] - e
+        if not np.all(np.isfinite(x_m)):
+            continue
+        z_x = _hysteretic_state(x_m, data.oscillator)
+        out.force[model.label] = (x_m, alpha * x_m + (1 - alpha) * z_x)
+        if hasattr(model.estimator, "predict_states"):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                states = model.estimator.predict_states(X).states
+            hidden = states[:, len(model.outputs) :]
+            design = np.column_stack([np.ones(len(hidden)), hidden])
+            coef = np.linalg.lstsq(design, z[cut], rcond=None)[0]
+            z_m = design @ coef
+            out.state[model.label] = (x_m, z_m)
+            out.state_correlation[model.label] = float(
+                abs(np.corrcoef(z_m, z[cut])[0, 1])
+            )
+    return out
+
+
+def _hysteresis_figure(loops: Bunch) -> Any:
+    from sysid_nn.plotting import plot_hysteresis
+
+    fig, (top, bottom) = panel_figure(2, row_height=3.6)
+    x, g, z = loops.truth
+    plot_hysteresis(x, g, label="true g", models=loops.force, ax=top)
+    top.set_title(
+        "Restoring force g = αX + (1-α)Z along the true and the simulated "
+        "displacements, test realisation 0",
+        fontsize=9,
+    )
+    plot_hysteresis(
+        x, z, label="true Z", models=loops.state, ylabel="hysteretic state Z", ax=bottom
+    )
+    bottom.set_title(
+        "Hysteretic state: truth and the ISSMs' estimated states", fontsize=9
+    )
+    return fig
+
+
+#: Figure files of a study directory, in the paper's order.
+FIGURES = {
+    "fig4_1_training_data.png": "Training data (fig. 4.1)",
+    "fig4_2_prediction.png": "One-step prediction on a test realisation (fig. 4.2)",
+    "fig4_3_residual_autocorrelation.png": (
+        "Autocorrelation of prediction errors (fig. 4.3)"
+    ),
+    "fig4_4_residual_cross_correlation.png": (
+        "Cross-correlation of prediction errors and input (fig. 4.4)"
+    ),
+    "fig4_5_prediction_error_statistics.png": (
+        "μ_Ns and σ_Ns of prediction errors (fig. 4.5)"
+    ),
+    "fig4_6_simulation.png": "Free-run simulation on a test realisation (fig. 4.6)",
+    "fig4_7_simulation_error_statistics.png": (
+        "μ_Ns and σ_Ns of simulation errors (fig. 4.7)"
+    ),
+    "hysteresis.png": "Hysteresis loops: truth and models' simulations",
+}
+
+
+def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
+    """Figure builders by file name; those needing absent data are left out."""
+    from sysid_nn.plotting import plot_records
+
+    def training() -> Any:
+        _, axes = panel_figure(2)
+        t = np.arange(data.train.excitation.shape[1]) * data.dt
+        return plot_records(t, data.train.excitation, data.train.displacement, ax=axes)
+
+    names = list(FIGURES)
+    builders = {
+        names[1]: lambda: _response_figure(
+            models, data, evaluation, "prediction", "Prediction"
+        ),
+        names[2]: lambda: _correlation_figure(models, data, evaluation, "acf"),
+        names[3]: lambda: _correlation_figure(models, data, evaluation, "ccf"),
+        names[4]: lambda: _statistics_figure(
+            evaluation, "prediction", FIGURES[names[4]]
+        ),
+        names[5]: lambda: _response_figure(
+            models, data, evaluation, "simulation", "Simulation"
+        ),
+        names[6]: lambda: _statistics_figure(
+            evaluation, "simulation", FIGURES[names[6]]
+        ),
+    }
+    if "train" in data:
+        builders[names[0]] = training
+    if loops is not None:
+        builders[names[7]] = lambda: _hysteresis_figure(loops)
+    return {name: builders[name] for name in names if name in builders}
