@@ -122,16 +122,10 @@ def hysteresis_loops(
 
     Examples
     --------
-    >>> from sysid_nn.study import (
-    ...     StudyConfig,
-    ...     evaluate,
-    ...     fit_models,
-    ...     generate_data,
-    ...     hysteresis_loops,
-    ... )
-    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
-    ...                      n_candidates=3, max_lag=10,
-    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> from sysid_nn.study import StudyConfig, evaluate, fit_models, generate_data
+    >>> from sysid_nn.study import hysteresis_loops
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2, max_lag=10,
+    ...                      n_candidates=3, estimator_params={"all": {"n_init": 1}})
     >>> data = generate_data(config)
     >>> models = fit_models(data, config)
     >>> loops = hysteresis_loops(models, data, evaluate(models, data, config))

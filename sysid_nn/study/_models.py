@@ -162,9 +162,8 @@ def fit_models(
     Examples
     --------
     >>> from sysid_nn.study import StudyConfig, fit_models, generate_data
-    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
-    ...                      n_candidates=3, max_lag=10,
-    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2, max_lag=10,
+    ...                      n_candidates=3, estimator_params={"all": {"n_init": 1}})
     >>> data = generate_data(config)
     >>> models = fit_models(data, config)
     >>> models["linear"].estimator.n_features_in_

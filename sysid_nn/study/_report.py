@@ -170,18 +170,11 @@ def write_report(
 
     Examples
     --------
-    >>> from sysid_nn.study import (
-    ...     StudyConfig,
-    ...     evaluate,
-    ...     fit_models,
-    ...     generate_data,
-    ...     summarize,
-    ...     write_report,
-    ... )
+    >>> from sysid_nn.study import StudyConfig, fit_models, generate_data
+    >>> from sysid_nn.study import evaluate, summarize, write_report
     >>> import tempfile, pathlib
-    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
-    ...                      n_candidates=3, max_lag=10,
-    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2, max_lag=10,
+    ...                      n_candidates=3, estimator_params={"all": {"n_init": 1}})
     >>> data = generate_data(config)
     >>> models = fit_models(data, config)
     >>> summary = summarize(evaluate(models, data, config), models)

@@ -118,10 +118,10 @@ def evaluate(
 
     Examples
     --------
-    >>> from sysid_nn.study import StudyConfig, evaluate, fit_models, generate_data
-    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
-    ...                      n_candidates=3, max_lag=10,
-    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> from sysid_nn.study import StudyConfig, fit_models, generate_data
+    >>> from sysid_nn.study import evaluate
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2, max_lag=10,
+    ...                      n_candidates=3, estimator_params={"all": {"n_init": 1}})
     >>> data = generate_data(config)
     >>> models = fit_models(data, config)
     >>> evaluation = evaluate(models, data, config)
@@ -177,16 +177,10 @@ def summarize(evaluation: Bunch, models: Mapping[str, StudyModel]) -> pd.DataFra
 
     Examples
     --------
-    >>> from sysid_nn.study import (
-    ...     StudyConfig,
-    ...     evaluate,
-    ...     fit_models,
-    ...     generate_data,
-    ...     summarize,
-    ... )
-    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2,
-    ...                      n_candidates=3, max_lag=10,
-    ...                      estimator_params={"all": {"n_init": 1}})
+    >>> from sysid_nn.study import StudyConfig, fit_models, generate_data
+    >>> from sysid_nn.study import evaluate, summarize
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2, max_lag=10,
+    ...                      n_candidates=3, estimator_params={"all": {"n_init": 1}})
     >>> data = generate_data(config)
     >>> models = fit_models(data, config)
     >>> summary = summarize(evaluate(models, data, config), models)
