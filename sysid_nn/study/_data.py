@@ -11,6 +11,21 @@ from sklearn.utils import Bunch
 from sysid_nn import HystereticOscillator
 from sysid_nn.study._config import StudyConfig, _check_int
 
+# Names and units of the record fields for figure axes: eq. 13-15 are written
+# per unit mass, so the excitation F is a force per unit mass, in m/s^2.
+_NAMES = {
+    "excitation": "excitation F",
+    "displacement": "displacement X",
+    "velocity": "velocity Ẋ",
+    "hysteretic": "hysteretic state Z",
+}
+_UNITS = {
+    "excitation": "m/s²",
+    "displacement": "m",
+    "velocity": "m/s",
+    "hysteretic": "m",
+}
+
 
 def select_typical(peaks: Sequence[float], k: int) -> np.ndarray:
     """Return the indices of the ``k`` records whose peak is nearest the median.
@@ -71,7 +86,9 @@ def generate_data(config: StudyConfig) -> Bunch:
         displacement, velocity, hysteretic`` arrays of shape
         ``(n_records, n_samples)``; ``t``, ``dt``, ``r0``, ``seeds``,
         ``candidate_peaks`` (peak ``|X|`` of every candidate),
-        ``train_index`` (the chosen candidates) and ``oscillator``.
+        ``train_index`` (the chosen candidates), ``oscillator``,
+        ``natural_period`` (``2 pi / omega0``, s) and the fields' ``names``
+        and ``units`` (for figure axes).
 
     Examples
     --------
@@ -102,4 +119,7 @@ def generate_data(config: StudyConfig) -> Bunch:
         candidate_peaks=peaks,
         train_index=chosen,
         oscillator=osc,
+        natural_period=2 * np.pi / osc.omega0,
+        names=dict(_NAMES),
+        units=dict(_UNITS),
     )

@@ -13,6 +13,13 @@ from sysid_nn.plotting import panel_figure
 from sysid_nn.study._models import StudyModel
 
 
+def _label(data: Bunch, field: str) -> str:
+    """Axis label of a record field: its name and, when known, its unit."""
+    name = data.get("names", {}).get(field, field)
+    unit = data.get("units", {}).get(field)
+    return f"{name} [{unit}]" if unit else name
+
+
 def _model_grid(model: StudyModel, n: int, dt: float) -> np.ndarray:
     return np.arange(n) * dt * model.step
 
@@ -26,34 +33,66 @@ def _response_figure(models, data, evaluation, mode, title) -> Any:
         y0 = y if y.ndim == 1 else y[:, 0]
         e = evaluation.errors[name, mode][0]
         t = _model_grid(model, y0.size, data.dt)
-        plot_response(t, y0, y0 - e, label=model.label, ax=ax)
+        ylabel = _label(data, model.outputs[0])
+        plot_response(t, y0, y0 - e, label=model.label, ylabel=ylabel, ax=ax)
         ax.set_title(f"{title}: {model.label}, test realisation 0", fontsize=9)
     return fig
 
 
+def _lag_span(models, data, evaluation) -> float:
+    """Lag range in seconds shared by every correlation panel.
+
+    The tests' largest lag on the coarsest model grid, and at least one
+    natural period when the system's is known, so that a period's worth of
+    residual correlation is in view whatever the model's sampling step.
+    """
+    span = max(evaluation.max_lag * data.dt * m.step for m in models.values())
+    return max(span, data.get("natural_period", 0.0))
+
+
 def _correlation_figure(models, data, evaluation, kind) -> Any:
     from sysid_nn.plotting import plot_autocorrelation, plot_cross_correlation
+    from sysid_nn.residuals import cross_correlation_test, whiteness_test
 
-    plot, results = {
-        "acf": (plot_autocorrelation, "whiteness"),
-        "ccf": (plot_cross_correlation, "cross_correlation"),
-    }[kind]
+    span = _lag_span(models, data, evaluation)
     fig, axes = panel_figure(len(models))
     for ax, (name, model) in zip(axes, models.items(), strict=True):
-        analysis = evaluation.analyses[name, "prediction"]
-        found = getattr(analysis, results).get((0, 0))
-        if found is None:
+        e = evaluation.errors[name, "prediction"][0]
+        if not np.all(np.isfinite(e)):
             ax.text(0.5, 0.5, f"{model.label}: prediction diverged", ha="center")
             continue
-        plot(found, dt=data.dt * model.step, title=model.label, ax=ax)
+        step = data.dt * model.step
+        lags = int(np.ceil(span / step - 1e-9))
+        tested = evaluation.max_lag * step
+        ax.axvspan(0 if kind == "acf" else -tested, tested, color="0.92", zorder=0)
+        if kind == "acf":
+            found = whiteness_test(e, lags, evaluation.alpha)
+            plot_autocorrelation(found, dt=step, title=model.label, ax=ax)
+            ax.set_xlim(-0.02 * span, 1.02 * span)
+        else:
+            (X,), _ = model.arrays(data.test, [0])
+            found = cross_correlation_test(e, X, lags, evaluation.alpha)
+            names = [_label(data, field) for field in model.inputs]
+            plot_cross_correlation(
+                found, dt=step, input_names=names, title=model.label, ax=ax
+            )
+            ax.set_xlim(-1.02 * span, 1.02 * span)
+    period = data.get("natural_period")
+    fig.suptitle(
+        f"One-step prediction errors, test realisation 0: lags up to {span:.3g} s"
+        + (f" (natural period {period:.3g} s)" if period else "")
+        + f";\nshaded: the lags of the tables' tests (up to {evaluation.max_lag} "
+        "samples of each model)",
+        fontsize=9,
+    )
     return fig
 
 
-def _statistics_figure(evaluation, mode, title) -> Any:
+def _statistics_figure(evaluation, mode, title, unit) -> Any:
     from sysid_nn.plotting import plot_error_statistics
 
     fig, (ax,) = panel_figure(1, row_height=3.6)
-    plot_error_statistics(evaluation.statistics[mode], title=title, ax=ax)
+    plot_error_statistics(evaluation.statistics[mode], unit=unit, title=title, ax=ax)
     return fig
 
 
@@ -160,22 +199,46 @@ def hysteresis_loops(
     return out
 
 
-def _hysteresis_figure(loops: Bunch) -> Any:
+def _hysteresis_figure(loops: Bunch, data: Bunch) -> Any:
     from sysid_nn.plotting import plot_hysteresis
 
-    fig, (top, bottom) = panel_figure(2, row_height=3.6)
     x, g, z = loops.truth
-    plot_hysteresis(x, g, label="true g", models=loops.force, ax=top)
-    top.set_title(
-        "Restoring force g = αX + (1-α)Z along the true and the simulated "
-        "displacements, test realisation 0",
+    unit = data.units["displacement"]
+    force = f"restoring term g = αX + (1-α)Z [{unit}]"
+    panels = [
+        (f"{label}: g along its free run", "true g", force, g, xy)
+        for label, xy in loops.force.items()
+    ]
+    panels += [
+        (
+            f"{label}: estimated hidden state, |r| = "
+            f"{loops.state_correlation[label]:.2f}",
+            "true Z",
+            _label(data, "hysteretic"),
+            z,
+            xy,
+        )
+        for label, xy in loops.state.items()
+    ]
+    fig, axes = panel_figure(max(1, -(-len(panels) // 2)), n_cols=2, width=10.0)
+    for ax, (title, truth, ylabel, y, xy) in zip(axes, panels, strict=False):
+        plot_hysteresis(
+            x,
+            y,
+            label=truth,
+            models={title.split(":")[0]: xy},
+            xlabel=_label(data, "displacement"),
+            ylabel=ylabel,
+            title=title,
+            ax=ax,
+        )
+        ax.title.set_fontsize(9)
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
+    fig.suptitle(
+        "Hysteresis on test realisation 0: the truth (grey) and each model along "
+        "its own free run; hidden states mapped onto Z by least squares",
         fontsize=9,
-    )
-    plot_hysteresis(
-        x, z, label="true Z", models=loops.state, ylabel="hysteretic state Z", ax=bottom
-    )
-    bottom.set_title(
-        "Hysteretic state: truth and the ISSMs' estimated states", fontsize=9
     )
     return fig
 
@@ -208,7 +271,17 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
     def training() -> Any:
         _, axes = panel_figure(2)
         t = np.arange(data.train.excitation.shape[1]) * data.dt
-        return plot_records(t, data.train.excitation, data.train.displacement, ax=axes)
+        return plot_records(
+            t,
+            data.train.excitation,
+            data.train.displacement,
+            excitation_label=_label(data, "excitation"),
+            displacement_label=_label(data, "displacement"),
+            ax=axes,
+        )
+
+    first = next(iter(models.values())).outputs[0]
+    unit = data.get("units", {}).get(first)
 
     names = list(FIGURES)
     builders = {
@@ -218,17 +291,17 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
         names[2]: lambda: _correlation_figure(models, data, evaluation, "acf"),
         names[3]: lambda: _correlation_figure(models, data, evaluation, "ccf"),
         names[4]: lambda: _statistics_figure(
-            evaluation, "prediction", FIGURES[names[4]]
+            evaluation, "prediction", FIGURES[names[4]], unit
         ),
         names[5]: lambda: _response_figure(
             models, data, evaluation, "simulation", "Simulation"
         ),
         names[6]: lambda: _statistics_figure(
-            evaluation, "simulation", FIGURES[names[6]]
+            evaluation, "simulation", FIGURES[names[6]], unit
         ),
     }
     if "train" in data:
         builders[names[0]] = training
     if loops is not None:
-        builders[names[7]] = lambda: _hysteresis_figure(loops)
+        builders[names[7]] = lambda: _hysteresis_figure(loops, data)
     return {name: builders[name] for name in names if name in builders}

@@ -120,6 +120,67 @@ def _machine() -> str:
     )
 
 
+# Where the user guide explains the verdicts below.
+_PITFALLS = (
+    "the user guide's *Known pitfalls of the hysteretic oscillator problem* "
+    "(`docs/user_guide/pitfalls.rst`, section \"The paper's networks as "
+    'published")'
+)
+_PAPER = ("tdl_paper", "issm_paper")
+
+
+def _verdicts(summary: pd.DataFrame) -> list[str]:
+    """Plain statements, from the computed results, that a reader must not miss.
+
+    Whether the paper's networks simulate unseen realisations (median free-run
+    NRMSE at most 1, i.e. better than the displacement's mean) and which
+    models' one-step residuals pass the whiteness test.
+    """
+    by = summary.set_index(["model", "mode"])
+    lines = []
+    paper = [m for m in _PAPER if (m, "simulation") in by.index]
+    if paper:
+        sim = {m: by.loc[(m, "simulation"), "nrmse_median"] for m in paper}
+        failing = [m for m in paper if not sim[m] <= 1]  # a NaN fails too
+        numbers = ", ".join(
+            f"{by.loc[(m, 'simulation'), 'label']} {_fmt(sim[m])}" for m in paper
+        )
+        if len(failing) == len(paper):
+            head = "The paper's networks as published do not simulate"
+        elif failing:
+            head = "Not every one of the paper's networks as published simulates"
+        else:
+            head = "The paper's networks as published simulate"
+        lines.append(
+            f"**{head} unseen realisations**: median free-run NRMSE {numbers} "
+            "(above 1 is worse than the displacement's mean)."
+        )
+    pred = summary.query("mode == 'prediction'")
+    n = int(pred["n_realizations"].max())
+    rates = pred["whiteness_pass_rate"]
+    listed = ", ".join(
+        f"{r.label} {_percent(r.whiteness_pass_rate)}" for r in pred.itertuples()
+    )
+    if rates.max() == 0:
+        head = "No model's one-step residuals pass the whiteness test"
+    elif rates.max() < 0.5:
+        head = (
+            "No model's one-step residuals pass the whiteness test on most realisations"
+        )
+    else:
+        head = "Some models' one-step residuals pass the whiteness test"
+    text = f"**{head}** (share of the {n} test realisations: {listed})"
+    if paper and rates.max() < 0.5:
+        text += (
+            ", unlike the paper's figs 4.3-4.4, where the prediction errors of "
+            "both networks are white"
+        )
+    lines.append(text + ".")
+    if paper:
+        lines.append(f"Why: see {_PITFALLS}.")
+    return lines
+
+
 def _findings(summary: pd.DataFrame) -> list[str]:
     sim = summary.query("mode == 'simulation'").set_index("model")
     lines = []
@@ -202,7 +263,9 @@ def write_report(
             }
         )
     lines = [f"# {title}", ""]
-    lines += ["## Results at a glance", "", _md_table(_glance(summary)), ""]
+    lines += ["## Results at a glance", ""]
+    lines += [f"- {line}" for line in _verdicts(summary)] + [""]
+    lines += [_md_table(_glance(summary)), ""]
     lines += [
         "NRMSE: root-mean-square error of the displacement over its standard "
         "deviation (0 perfect, 1 no better than its mean); `sim. / linear`: "

@@ -217,6 +217,7 @@ def run_validation(
     max_lag: int = 25,
     alpha: float = 0.05,
     n_jobs: int | None = None,
+    units: Mapping[str, str] | None = None,
     setup: Sequence[str] = (),
     progress: bool = False,
 ) -> Bunch:
@@ -243,6 +244,9 @@ def run_validation(
         Residual tests' largest lag and significance level.
     n_jobs : int, optional
         Parallel jobs over records.
+    units : dict of str to str, optional
+        Unit of each record field, e.g. ``{"force": "N", "x": "m"}``, shown
+        on the figures' axes (and in the error statistics' axis).
     setup : sequence of str
         Extra lines for the report's setup section (e.g. file names).
     progress : bool, default=False
@@ -265,13 +269,14 @@ def run_validation(
     ...                    ("force",), ("x",))
     >>> _ = model.estimator.fit(*model.arrays(records))
     >>> out = pathlib.Path(tempfile.mkdtemp()) / "validation"
-    >>> report = run_validation(model, records, out, dt=0.01, max_lag=10)
+    >>> report = run_validation(model, records, out, dt=0.01, max_lag=10,
+    ...                         units={"force": "m/s²", "x": "m"})
     >>> sorted(p.name for p in out.glob("*.csv"))
     ['results.csv', 'summary.csv']
     """
     config = StudyConfig(n_jobs=n_jobs, max_lag=max_lag, alpha=alpha)
     models = {"model": model}
-    data = Bunch(test=records, dt=float(dt))
+    data = Bunch(test=records, dt=float(dt), units=dict(units or {}))
     with _staged_directory(out_dir, overwrite) as tmp:
         evaluation = evaluate(models, data, config, progress=progress)
         summary, figures = _write_outputs(tmp, models, data, evaluation, None, progress)

@@ -114,7 +114,7 @@ def evaluate(
         ``{mode: {model: ErrorStatistics}}`` (eq. 19-20); ``errors``:
         ``{(model, mode): list of error arrays}``; ``analyses``: the
         :class:`~sysid_nn.residuals.ResidualAnalysis` of the first record,
-        ``{(model, mode): analysis}``.
+        ``{(model, mode): analysis}``; ``max_lag`` and ``alpha`` of the tests.
 
     Examples
     --------
@@ -153,7 +153,12 @@ def evaluate(
         for mode in MODES
     }
     return Bunch(
-        results=results, statistics=statistics, errors=errors, analyses=outputs[0][2]
+        results=results,
+        statistics=statistics,
+        errors=errors,
+        analyses=outputs[0][2],
+        max_lag=config.max_lag,
+        alpha=config.alpha,
     )
 
 
