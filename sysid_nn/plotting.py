@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from sysid_nn._docstring import insert_docs
+
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -38,6 +40,15 @@ __all__ = [
     "plot_residual_analysis",
     "plot_response",
 ]
+
+# The ``ax`` (and ``title``) parameters of the plotting functions, documented once.
+_AX_DOC = "ax : Axes, optional\n    Axes to draw on; a new figure if None."
+_document_axes = insert_docs(
+    ax=_AX_DOC,
+    title_ax="title : str\n    Axes title.\n" + _AX_DOC,
+    ax_pair="ax : pair of Axes, optional\n    Axes for the two panels; a new "
+    "figure if None.",
+)
 
 _BAND_STYLE = {"color": "k", "linestyle": ":", "linewidth": 1.0}
 _REFERENCE_STYLE = {"color": "0.65", "linewidth": 2.5, "zorder": 1}
@@ -135,6 +146,7 @@ def _finish(ax: Axes, xlabel: str, ylabel: str, title: str | None) -> Axes:
     return ax
 
 
+@_document_axes
 def plot_records(
     t: Any,
     excitation: Any,
@@ -155,8 +167,7 @@ def plot_records(
         row per record (all drawn).
     excitation_label, displacement_label : str
         Y-axis labels (units are the user's).
-    ax : pair of Axes, optional
-        Axes for the two panels; a new figure if None.
+    %(ax_pair)s
 
     Returns
     -------
@@ -187,6 +198,7 @@ def plot_records(
     return top.figure
 
 
+@_document_axes
 def plot_response(
     t: Any,
     measured: Any,
@@ -215,8 +227,7 @@ def plot_response(
         ``"displacement X [m]"``.
     title : str, optional
         Axes title.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    %(ax)s
 
     Returns
     -------
@@ -242,6 +253,7 @@ def plot_response(
     return _finish(ax, "time t [s]", ylabel, title)
 
 
+@_document_axes
 def plot_autocorrelation(
     whiteness_result: WhitenessResult,
     *,
@@ -257,10 +269,7 @@ def plot_autocorrelation(
         From :func:`sysid_nn.residuals.whiteness_test`.
     dt : float, optional
         Sampling step; lags are shown in seconds when given.
-    title : str
-        Axes title.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    %(title_ax)s
 
     Returns
     -------
@@ -285,6 +294,7 @@ def plot_autocorrelation(
     return _finish(ax, xlabel, "r_ee(τ) / r_ee(0)", title)
 
 
+@_document_axes
 def plot_cross_correlation(
     cc_result: CrossCorrelationResult,
     *,
@@ -305,10 +315,7 @@ def plot_cross_correlation(
     input_names : sequence of str, optional
         Legend text of every input column, e.g. ``["excitation F"]``;
         ``input i`` by default.
-    title : str
-        Axes title.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    %(title_ax)s
 
     Returns
     -------
@@ -343,6 +350,7 @@ def plot_cross_correlation(
     return _finish(ax, xlabel + "  (τ > 0: input leads residual)", "r_eu(τ)", title)
 
 
+@_document_axes
 def plot_error_statistics(
     statistics: Mapping[str, ErrorStatistics],
     *,
@@ -367,10 +375,7 @@ def plot_error_statistics(
         (``mu_Ns`` may be negative) and linear below the smallest non-zero
         bar; ``"auto"`` chooses it when the largest bar is more than 100
         times the smallest non-zero one.
-    title : str
-        Axes title.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    %(title_ax)s
 
     Returns
     -------
@@ -427,6 +432,7 @@ def plot_error_statistics(
     return _finish(ax, "", ylabel, title)
 
 
+@_document_axes
 def plot_hysteresis(
     displacement: Any,
     restoring_force: Any,
@@ -456,8 +462,7 @@ def plot_hysteresis(
         Y-axis label, e.g. ``"hysteretic state Z [m]"``.
     title : str, default="Hysteresis loop"
         Axes title.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    %(ax)s
 
     Returns
     -------
@@ -489,6 +494,7 @@ def plot_hysteresis(
     return _finish(ax, xlabel, ylabel, title)
 
 
+@_document_axes
 def plot_residual_analysis(
     analysis: ResidualAnalysis,
     *,
@@ -509,8 +515,7 @@ def plot_residual_analysis(
         Output column.
     dt : float, optional
         Sampling step; lags in seconds when given.
-    ax : pair of Axes, optional
-        Axes for the two panels; a new figure if None.
+    %(ax_pair)s
 
     Returns
     -------
