@@ -97,36 +97,16 @@ def _statistics_figure(evaluation, mode, title, unit) -> Any:
 
 
 def _hysteretic_state(x: np.ndarray, osc: Any, substeps: int = 4) -> np.ndarray:
-    """Bouc-Wen state ``Z`` (eq. 15) driven by a displacement history from rest.
+    """Bouc-Wen state ``Z`` (eq. 15) of ``osc`` driven by a displacement history.
 
-    Eq. 15 is rate-independent (``dZ/dX`` depends on ``Z`` and the sign of
-    ``dX`` only), so the true hysteretic element can follow any displacement
-    history, a model's simulation included; integrated in ``X`` by RK4 on
-    ``substeps`` pieces of every sample step.
+    Eq. 15 is rate-independent, so the true hysteretic element can follow
+    any displacement history, a model's simulation included.
     """
+    from sysid_nn._kernels._oscillator import hysteretic_state
+
     p = osc.get_params()
-    beta, gamma, n = (
-        p["beta"] / p["z0"] ** p["n"],
-        p["gamma"] / p["z0"] ** p["n"],
-        p["n"],
-    )
-
-    def slope(z: float, dx: float) -> float:
-        s = dx * z
-        sign = 1.0 if s > 0 else (-1.0 if s < 0 else 0.0)
-        return 1.0 - (beta * sign + gamma) * abs(z) ** n
-
-    z = np.zeros(x.size)
-    for k in range(1, x.size):
-        h, zk = (x[k] - x[k - 1]) / substeps, z[k - 1]
-        for _ in range(substeps):
-            k1 = slope(zk, h)
-            k2 = slope(zk + 0.5 * h * k1, h)
-            k3 = slope(zk + 0.5 * h * k2, h)
-            k4 = slope(zk + h * k3, h)
-            zk += h * (k1 + 2 * k2 + 2 * k3 + k4) / 6
-        z[k] = zk
-    return z
+    x = np.ascontiguousarray(x, dtype=float)
+    return hysteretic_state(x, substeps, p["beta"], p["gamma"], p["n"], p["z0"])
 
 
 def hysteresis_loops(
