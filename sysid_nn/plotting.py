@@ -193,7 +193,7 @@ def plot_records(
         for row in np.atleast_2d(np.asarray(data, dtype=float)):
             panel.plot(t, row, linewidth=0.8)
         panel.set_ylabel(label)
-    bottom.set_xlabel("time t [s]")
+        panel.set_xlabel("time t [s]")
     top.set_title("Training data")
     return top.figure
 
@@ -501,6 +501,7 @@ def plot_residual_analysis(
     sequence: int | str = 0,
     output: int = 0,
     dt: float | None = None,
+    input_names: Sequence[str] | None = None,
     ax: Sequence[Axes] | None = None,
 ) -> Figure:
     """Autocorrelation and cross-correlation panels of a residual analysis.
@@ -515,6 +516,8 @@ def plot_residual_analysis(
         Output column.
     dt : float, optional
         Sampling step; lags in seconds when given.
+    input_names : sequence of str, optional
+        Legend text of every input column (default ``input i``).
     %(ax_pair)s
 
     Returns
@@ -560,6 +563,7 @@ def plot_residual_analysis(
     plot_cross_correlation(
         analysis.cross_correlation[key],
         dt=dt,
+        input_names=input_names,
         title=f"Cross-correlation of {kind} errors and input",
         ax=bottom,
     )

@@ -281,3 +281,12 @@ def test_plot_labels_carry_the_users_units():
     ref, model = plot_hysteresis(t, t**2, models={"M": t**2}).get_lines()
     assert ref.get_linewidth() > model.get_linewidth()
     assert ref.get_zorder() < model.get_zorder()
+
+
+def test_residual_analysis_plot_names_the_inputs():
+    rng = np.random.default_rng(5)
+    report = analyze_residuals(
+        _Zero(), rng.standard_normal((200, 1)), rng.standard_normal(200), max_lag=5
+    )
+    fig = plot_residual_analysis(report, input_names=["force F [N]"])
+    assert legend_texts(fig.axes[1])[0] == "force F [N]"

@@ -324,6 +324,7 @@ def test_figures_carry_units_and_one_model_per_loop(study):
         "excitation F [m/s²]",
         "displacement X [m]",
     ]
+    assert {ax.get_xlabel() for ax in training.axes} == {"time t [s]"}
     assert {ax.get_ylabel() for ax in response.axes} == {"displacement X [m]"}
     assert {ax.get_xlabel() for ax in response.axes} == {"time t [s]"}
     assert stats.axes[0].get_ylabel().startswith("error [m]")
