@@ -422,6 +422,13 @@ def plot_error_statistics(
         ends = np.asarray(mus + sigmas, dtype=float)
         ends = ends[np.isfinite(ends)]
         ax.set_ylim(5 * min(ends.min(), 0.0), 5 * max(ends.max(), 0.0))
+        # At most five labelled decades a side, no minor ticks: a symlog axis
+        # otherwise labels every decade, which is slow to lay out and unreadable.
+        low, high = np.floor(np.log10(sizes.min())), np.ceil(np.log10(sizes.max()))
+        decades = 10.0 ** np.arange(low, high + 1, max(1, int(high - low) // 5 + 1))
+        ticks = [*(-decades[::-1] if ends.min() < 0 else []), 0.0, *decades]
+        ax.set_yticks(ticks if ends.max() > 0 else ticks[: decades.size + 1])
+        ax.minorticks_off()
     else:
         ax.margins(y=0.12)
     ax.axhline(0.0, color="k", linewidth=0.5)
