@@ -233,10 +233,8 @@ def test_select_typical():
 
 
 def test_hysteretic_element_reproduces_true_state_from_displacement(study):
-    from sysid_nn.study._figures import _hysteretic_state
-
     test = study.data.test
-    z = _hysteretic_state(test.displacement[0], study.data.oscillator)
+    z = study.data.oscillator.hysteretic_state(test.displacement[0])
     scale = np.max(np.abs(test.hysteretic[0]))
     assert np.max(np.abs(z - test.hysteretic[0])) < 1e-2 * scale
     loops = hysteresis_loops(study.models, study.data, study.evaluation)

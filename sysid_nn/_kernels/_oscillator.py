@@ -81,23 +81,25 @@ def simulate_bouc_wen(
 @njit(cache=True, error_model="numpy")
 def hysteretic_state(
     x, n_substeps, beta, gamma, n, z0
-):  # pragma: no cover - compiled; exercised through the study's figures
-    """Bouc-Wen state ``Z`` (eq. 15) along a displacement history, from rest.
+):  # pragma: no cover - compiled; exercised through HystereticOscillator
+    """Bouc-Wen state ``Z`` (eq. 15) along every row of displacements, from rest.
 
     Eq. 15 is rate-independent (``dZ/dX`` depends on ``Z`` and the direction
     of ``dX`` only), so ``Z`` follows any displacement history; integrated in
-    ``X`` by RK4 on ``n_substeps`` pieces of every sample step.
+    ``X`` by RK4 on ``n_substeps`` pieces of every sample step. ``x`` has
+    shape (n_realizations, n_samples); so has the result.
     """
     beta_s, gamma_s = _scaled_loop_params(beta, gamma, n, z0)
-    z = np.zeros(x.size)
-    for k in range(1, x.size):
-        h = (x[k] - x[k - 1]) / n_substeps
-        zk = z[k - 1]
-        for _ in range(n_substeps):
-            k1 = _hysteretic_slope(zk, h, beta_s, gamma_s, n)
-            k2 = _hysteretic_slope(zk + 0.5 * h * k1, h, beta_s, gamma_s, n)
-            k3 = _hysteretic_slope(zk + 0.5 * h * k2, h, beta_s, gamma_s, n)
-            k4 = _hysteretic_slope(zk + h * k3, h, beta_s, gamma_s, n)
-            zk += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        z[k] = zk
+    z = np.zeros(x.shape)
+    for r in range(x.shape[0]):
+        for k in range(1, x.shape[1]):
+            h = (x[r, k] - x[r, k - 1]) / n_substeps
+            zk = z[r, k - 1]
+            for _ in range(n_substeps):
+                k1 = _hysteretic_slope(zk, h, beta_s, gamma_s, n)
+                k2 = _hysteretic_slope(zk + 0.5 * h * k1, h, beta_s, gamma_s, n)
+                k3 = _hysteretic_slope(zk + 0.5 * h * k2, h, beta_s, gamma_s, n)
+                k4 = _hysteretic_slope(zk + h * k3, h, beta_s, gamma_s, n)
+                zk += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            z[r, k] = zk
     return z

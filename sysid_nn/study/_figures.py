@@ -96,19 +96,6 @@ def _statistics_figure(evaluation, mode, title, unit) -> Any:
     return fig
 
 
-def _hysteretic_state(x: np.ndarray, osc: Any, substeps: int = 4) -> np.ndarray:
-    """Bouc-Wen state ``Z`` (eq. 15) of ``osc`` driven by a displacement history.
-
-    Eq. 15 is rate-independent, so the true hysteretic element can follow
-    any displacement history, a model's simulation included.
-    """
-    from sysid_nn._kernels._oscillator import hysteretic_state
-
-    p = osc.get_params()
-    x = np.ascontiguousarray(x, dtype=float)
-    return hysteretic_state(x, substeps, p["beta"], p["gamma"], p["n"], p["z0"])
-
-
 def hysteresis_loops(
     models: Mapping[str, StudyModel], data: Bunch, evaluation: Bunch
 ) -> Bunch:
@@ -162,7 +149,7 @@ def hysteresis_loops(
         x_m = x[cut] - e
         if not np.all(np.isfinite(x_m)):
             continue
-        z_x = _hysteretic_state(x_m, data.oscillator)
+        z_x = data.oscillator.hysteretic_state(x_m)
         out.force[model.label] = (x_m, alpha * x_m + (1 - alpha) * z_x)
         if hasattr(model.estimator, "predict_states"):
             with warnings.catch_warnings():
