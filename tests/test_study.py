@@ -333,3 +333,15 @@ def test_figures_carry_units_and_one_model_per_loop(study):
         assert len(ax.get_legend().get_texts()) == 2  # the truth and one model
         assert ax.get_xlabel() == "displacement X [m]"
         assert ax.get_ylabel().endswith("[m]")
+
+
+def test_pickles_name_the_public_module():
+    import pickle
+
+    from sysid_nn.study import StudyModel
+
+    model = StudyModel("linear", None, ("excitation",), ("displacement",))
+    for obj in (StudyConfig(seed=1), model):
+        dumped = pickle.dumps(obj)
+        assert b"sysid_nn.study" in dumped and b"sysid_nn.study._" not in dumped
+        assert pickle.loads(dumped) == obj

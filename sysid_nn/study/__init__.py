@@ -46,6 +46,10 @@ from sysid_nn.study._report import write_report
 from sysid_nn.study._run import run_study, run_validation
 from sysid_nn.study._scoring import evaluate, summarize
 
+# Saved models (``sysid-nn fit --save``) pickle these classes: they are found
+# under the public path, whichever private module defines them.
+StudyConfig.__module__ = StudyModel.__module__ = __name__
+
 __all__ = [
     "FIGURES",
     "MODES",
