@@ -377,7 +377,9 @@ def _hysteresis_lines(loops: Bunch) -> list[str]:
             + "."
         )
     lines.append(
-        "Restoring force of the models: the true hysteretic element (eq. 15) "
-        "driven by each model's simulated displacement."
+        "One panel per model: the restoring term g = αX + (1-α)Z (eq. 14) that "
+        "the true hysteretic element (eq. 15) develops along the model's "
+        "simulated displacement, over the truth in grey; one panel per ISSM for "
+        "its estimated hidden state against its simulated displacement."
     )
     return lines
