@@ -19,7 +19,7 @@ import scipy.signal
 from numpy.typing import ArrayLike
 from sklearn.utils import check_random_state
 
-from sysid_nn._docstring import insert_docs
+from sysid_nn._docstrings import fill_doc
 from sysid_nn._validation import (
     check_finite_array,
     check_positive,
@@ -59,8 +59,8 @@ n_realizations : int or None, default=None
 random_state : int, RandomState instance or None, default=None
     Seed or generator, converted with :func:`sklearn.utils.check_random_state`.
 """.rstrip("\n")
-_document_filter = insert_docs(filter_parameters=_FILTER_PARAMETERS)
-_document_records = insert_docs(record_parameters=_RECORD_PARAMETERS)
+_document_filter = fill_doc(filter_parameters=_FILTER_PARAMETERS)
+_document_records = fill_doc(record_parameters=_RECORD_PARAMETERS)
 
 
 def _check_t1_t2(t1: float, t2: float) -> tuple[float, float]:

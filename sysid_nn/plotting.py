@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from sysid_nn._docstring import insert_docs
+from sysid_nn._docstrings import fill_doc
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
@@ -43,7 +43,7 @@ __all__ = [
 
 # The ``ax`` (and ``title``) parameters of the plotting functions, documented once.
 _AX_DOC = "ax : Axes, optional\n    Axes to draw on; a new figure if None."
-_document_axes = insert_docs(
+_document_axes = fill_doc(
     ax=_AX_DOC,
     title_ax="title : str\n    Axes title.\n" + _AX_DOC,
     ax_pair="ax : pair of Axes, optional\n    Axes for the two panels; a new "
