@@ -23,10 +23,12 @@ def _evaluate_record(
     models: Mapping[str, StudyModel],
     records: Mapping[str, Any],
     dt: float,
-    max_lag: int,
-    alpha: float,
+    config: StudyConfig,
 ) -> tuple[list[dict], dict[tuple[str, str], np.ndarray], dict]:
-    """All models and modes on record ``j``: rows, scored errors, analyses."""
+    """All models and modes on record ``j``: rows, scored errors, analyses.
+
+    ``config`` gives the residual tests' ``max_lag`` and ``alpha``.
+    """
     rows, errors, analyses = [], {}, {}
     for name, model in models.items():
         (X,), (y,) = model.arrays(records, [j])
@@ -40,8 +42,8 @@ def _evaluate_record(
                     X,
                     y,
                     mode=mode,
-                    max_lag=max_lag,
-                    alpha=alpha,
+                    max_lag=config.max_lag,
+                    alpha=config.alpha,
                     nonlinear=False,
                 )
             e = np.asarray(analysis.residuals)
@@ -134,7 +136,7 @@ def evaluate(
     recs = data[records]
     n = len(recs[next(iter(models.values())).inputs[0]])
     task = delayed(_evaluate_record)
-    args = (models, recs, data.dt, config.max_lag, config.alpha)
+    args = (models, recs, data.dt, config)
     # Outside a joblib backend context None means serial; inside (dask) the
     # context's own setting applies.
     parallel = Parallel(n_jobs=config.n_jobs, return_as="generator")
