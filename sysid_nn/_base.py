@@ -32,9 +32,8 @@ from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
-from sysid_nn._validation import check_same_width
-
 from sysid_nn._progress import report_stage
+from sysid_nn._validation import check_same_width
 
 __all__ = ["DivergenceWarning"]
 

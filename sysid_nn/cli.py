@@ -1011,6 +1011,7 @@ def _run_validate(args: argparse.Namespace) -> int:
         overwrite=args.overwrite,
         max_lag=args.max_lag,
         n_jobs=args.n_jobs,
+        units=units,
         setup=[
             f"Model: {args.model}, fitted on {', '.join(bundle.files)}.",
             f"Validation data: {', '.join(map(str, args.files))}"
