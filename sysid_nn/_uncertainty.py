@@ -21,6 +21,8 @@ from itertools import pairwise
 
 import numpy as np
 
+from sysid_nn._kernels._propagation import row_variances
+
 #: Eigenvalues of the normal matrix below this share of the largest are
 #: treated as zero (pseudo-inverse): directions the training data do not
 #: determine get no variance instead of an arbitrary huge one. ``J^T J``
@@ -112,7 +114,7 @@ def fit_covariance(est, train) -> None:
         est.n_effective_params_ = np.nan
         est.noise_variance_ = nan
         est.one_step_noise_variance_ = nan
-        est._cov_root = np.full((n_w, 1), np.nan)
+        est._cov_root = np.full((1, n_w), np.nan)
         return
     if getattr(est, "init", None) == "tdl":
         tdl = est.tdl_
@@ -142,10 +144,11 @@ def fit_covariance(est, train) -> None:
     est.one_step_noise_variance_ = (
         _residual_variance(one, n_eff, p) * scale2 if one is not None else nan
     )
-    # A square root C = L L^T, kept so that every band costs one product.
+    # A square root C = L L^T (kept transposed), so that every band costs
+    # one product.
     lam, V = np.linalg.eigh(cov)
     keep = lam > _RCOND * lam.max(initial=0.0)
-    est._cov_root = np.ascontiguousarray(V[:, keep] * np.sqrt(lam[keep]))
+    est._cov_root = np.ascontiguousarray((V[:, keep] * np.sqrt(lam[keep])).T)
 
 
 def check_interval(interval) -> None:
@@ -169,8 +172,9 @@ def output_std(est, Yhat, J, data, as_list, y_1d, interval, one_step=False):
     check_interval(interval)
     p = est.n_outputs_
     rows = data.modelled
-    JL = J @ est._cov_root
-    var = np.einsum("ij,ij->i", JL, JL).reshape(len(rows), p) * est._y_scale**2
+    var = np.empty(len(J))
+    row_variances(J, est._cov_root, var)
+    var = var.reshape(len(rows), p) * est._y_scale**2
     if interval == "prediction":
         noise = est.one_step_noise_variance_ if one_step else est.noise_variance_
         var = var + noise
