@@ -44,7 +44,7 @@ from sysid_nn.uncertainty import interval_coverage, normal_interval  # noqa: E40
 SEED = 2024
 N_TEST = 10
 LEVEL = 0.95
-NOISE_LEVELS = (0.01, 0.05)
+NOISE_LEVELS = (0.001, 0.01)
 MODELS = {
     "TDL default": TDLRegressor,
     "ISSM default (X only, p=1)": ISSMRegressor,

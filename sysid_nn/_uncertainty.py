@@ -17,20 +17,25 @@ standardised units and converts to the user's units on the way out.
 from __future__ import annotations
 
 import copy
+import warnings
 from itertools import pairwise
 
 import numpy as np
 
 from sysid_nn._kernels._propagation import row_variances
 
-#: Eigenvalues of the normal matrix below this share of the largest are
-#: treated as zero (pseudo-inverse): directions the training data do not
-#: determine get no variance instead of an arbitrary huge one. ``J^T J``
-#: squares the condition number of ``J``, so this drops directions whose
-#: singular value is below 1e-5 of the largest.
+#: Eigenvalues of the normal matrix (scaled to a unit diagonal) below this
+#: share of the largest are treated as zero (pseudo-inverse): directions the
+#: training data do not determine get no variance instead of an arbitrary
+#: huge one. ``J^T J`` squares the condition number of ``J``, so this drops
+#: directions whose singular value is below 1e-5 of the largest.
 _RCOND = 1e-10
 
 _INTERVALS = ("prediction", "confidence")
+#: A sensitivity ``|d yhat / d w|`` (standardised units) above this along the
+#: training records means that a change of a weight by 1e-6 moves the output
+#: by its standard deviation: the linearisation behind the bands fails.
+_SENSITIVITY_LIMIT = 1e6
 
 
 def _normal_matrix(est, w, data, seg, cols=None):
@@ -38,7 +43,8 @@ def _normal_matrix(est, w, data, seg, cols=None):
 
     The one place where the full Jacobian of the training data is formed;
     a memory-bounded accumulation can replace it. Returns ``(JtJ, rss,
-    n_rows)`` with ``rss`` per output, or ``None`` if the run diverges.
+    n_rows, largest |J|)`` with ``rss`` per output, or ``None`` if the run
+    diverges.
     """
     Yhat, J, diverged, _ = est._run(w, data, seg, True)
     if (diverged >= 0).any():
@@ -47,15 +53,25 @@ def _normal_matrix(est, w, data, seg, cols=None):
         J = J[:, cols]
     rows = data.modelled
     R = Yhat[rows] - data.Y[rows]
-    return J.T @ J, (R * R).sum(axis=0), len(rows)
+    return J.T @ J, (R * R).sum(axis=0), len(rows), float(np.abs(J).max(initial=0))
 
 
 def _pseudo_inverse(M):
-    """Symmetric pseudo-inverse with the :data:`_RCOND` cutoff."""
-    lam, V = np.linalg.eigh(M)
+    """Symmetric pseudo-inverse with the :data:`_RCOND` cutoff.
+
+    The cutoff applies to ``M`` scaled to a unit diagonal (as Marquardt's
+    damping does): a weight the outputs are very sensitive to must not push
+    the well-determined ones below the cutoff. Weights with a zero column
+    get no variance.
+    """
+    d = np.sqrt(np.diag(M))
+    live = d > 0
+    D = np.where(live, 1.0 / np.where(live, d, 1.0), 0.0)
+    lam, V = np.linalg.eigh(D[:, None] * M * D[None, :])
     top = lam.max(initial=0.0)
     keep = lam > _RCOND * top if top > 0 else np.zeros(len(lam), dtype=bool)
-    return (V[:, keep] / lam[keep]) @ V[:, keep].T
+    inv = (V[:, keep] / lam[keep]) @ V[:, keep].T
+    return D[:, None] * inv * D[None, :]
 
 
 def _delta_covariance(normal, penalty):
@@ -67,7 +83,7 @@ def _delta_covariance(normal, penalty):
 
 def _residual_variance(normal, n_eff, p):
     """Residual variance per output, corrected for ``n_eff`` fitted weights."""
-    _, rss, n_rows = normal
+    _, rss, n_rows, _ = normal
     dof = max(n_rows - n_eff / p, 1.0)
     return rss / dof
 
@@ -126,6 +142,17 @@ def fit_covariance(est, train) -> None:
         inv, n_eff = _delta_covariance(free, alpha * mask)
         s2 = float(free[1].sum()) / max(free[2] * p - n_eff, 1.0)
         cov = s2 * inv
+    if free[3] > _SENSITIVITY_LIMIT:
+        warnings.warn(
+            f"The outputs of this {type(est).__name__} are extremely sensitive to "
+            f"its weights along the training records (|d yhat / d w| up to "
+            f"{free[3]:.1e} in standardised units): its recurrence is at the edge "
+            "of stability there, and the bands of return_std=True, which "
+            "linearise the outputs in the weights, are unreliable. Check them "
+            "with sysid_nn.uncertainty.ensemble_std.",
+            UserWarning,
+            stacklevel=4,
+        )
     innovations = getattr(est, "_innovation_index", None)
     if innovations is not None and est._final_segment() != 1 and one is not None:
         idx = innovations()
@@ -144,11 +171,23 @@ def fit_covariance(est, train) -> None:
     est.one_step_noise_variance_ = (
         _residual_variance(one, n_eff, p) * scale2 if one is not None else nan
     )
-    # A square root C = L L^T (kept transposed), so that every band costs
-    # one product.
-    lam, V = np.linalg.eigh(cov)
-    keep = lam > _RCOND * lam.max(initial=0.0)
-    est._cov_root = np.ascontiguousarray((V[:, keep] * np.sqrt(lam[keep])).T)
+    est._cov_root = _square_root(cov)
+
+
+def _square_root(cov):
+    """``L^T`` with ``C = L L^T``, so that every band costs one product.
+
+    Computed on ``C`` scaled to a unit diagonal: the variances of the weights
+    span many decades, and each direction kept counts on the data it came
+    from. Only eigenvalues at rounding level are dropped.
+    """
+    d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    live = d > 0
+    D = np.where(live, 1.0 / np.where(live, d, 1.0), 0.0)
+    lam, V = np.linalg.eigh(D[:, None] * cov * D[None, :])
+    keep = lam > len(lam) * np.finfo(float).eps * lam.max(initial=0.0)
+    root = d[:, None] * V[:, keep] * np.sqrt(lam[keep])
+    return np.ascontiguousarray(root.T)
 
 
 def check_interval(interval) -> None:

@@ -274,3 +274,33 @@ def test_plot_band_shades_the_interval():
     assert ys.min() == pytest.approx(-1.959964, rel=1e-5)
     assert ax.get_lines()[0].get_label() == "sim"
     plt.close(ax.figure)
+
+
+def test_cli_validate_draws_and_reports_bands(tmp_path, capsys):
+    import pandas as pd
+
+    from sysid_nn.cli import main
+
+    rng = np.random.default_rng(9)
+    frames = []
+    for k in range(3):
+        u, _, y = linear_record(300, rng, noise=0.05)
+        frames.append(pd.DataFrame({"realization": k, "force": u[:, 0], "x": y}))
+    train, new = tmp_path / "train.csv", tmp_path / "new.csv"
+    frames[0].to_csv(train, index=False)
+    pd.concat(frames[1:]).to_csv(new, index=False)
+    model = tmp_path / "model.joblib"
+    argv = ["fit", str(train), "--input", "force", "--output", "x", "--hidden", "0"]
+    argv += ["--output-lags", "2", "--input-lags", "1", "--n-init", "1"]
+    assert main([*argv, "--dt", "0.01", "--save", str(model)]) == 0
+    out = tmp_path / "validation"
+    argv = ["validate", "--model", str(model), str(new), "--split-by", "realization"]
+    assert main([*argv, "--out", str(out), "--max-lag", "5", "--band", "0.9"]) == 0
+    printed = capsys.readouterr().out
+    table = pd.read_csv(out / "band.csv")
+    assert list(table["record"]) == [0, 1]
+    assert np.all((table["coverage"] > 0.8) & (table["coverage"] < 0.97))
+    assert "90 % prediction band of the free run covers" in printed
+    assert (out / "band_0.png").exists() and (out / "band_1.png").exists()
+    with pytest.raises(SystemExit):
+        main([*argv, "--out", str(out), "--band", "95"])
