@@ -10,11 +10,11 @@ delta method behind ``return_std``.
 
 The delta method (see the user guide, :ref:`uncertainty`) assumes that the
 model structure can represent the system, that the residuals of the final
-training objective are independent with constant variance per output (white
-measurement noise for the simulation focus, white innovations for the
-prediction focus), and that the outputs are close to linear in the weights
-over the spread of the weights. :func:`ensemble_std` assumes none of the
-last: it refits the model and looks at the spread of the refitted models.
+training objective are stationary (their autocorrelation is accounted for by
+a Bartlett long-run covariance), that the fitted weights minimise the
+training loss, and that the outputs are close to linear in the weights over
+the spread of the weights. :func:`ensemble_std` assumes none of the last
+two: it refits the model and looks at the spread of the refitted models.
 """
 
 from __future__ import annotations

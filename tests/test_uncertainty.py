@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pickle
 import warnings
+from itertools import pairwise
 
 import matplotlib
 
@@ -15,6 +16,7 @@ import pytest
 from scipy.signal import lfilter
 
 from sysid_nn import ISSMRegressor, TDLRegressor
+from sysid_nn._uncertainty import _bandwidth, _bartlett
 from sysid_nn.plotting import plot_band
 from sysid_nn.uncertainty import ensemble_std, interval_coverage, normal_interval
 
@@ -304,3 +306,23 @@ def test_cli_validate_draws_and_reports_bands(tmp_path, capsys):
     assert (out / "band_0.png").exists() and (out / "band_1.png").exists()
     with pytest.raises(SystemExit):
         main([*argv, "--out", str(out), "--band", "95"])
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.9])
+def test_long_run_variance_of_correlated_residuals(rho):
+    """The Bartlett estimate finds the long-run variance ``(1 + rho) / (1 - rho)``.
+
+    White residuals get a bandwidth of a sample or two and the plain
+    variance; AR(1) residuals the inflation that makes ``J^T J`` overstate
+    the information in correlated data.
+    """
+    rng = np.random.default_rng(10)
+    n = 40000
+    e = rng.standard_normal(n)
+    r = lfilter([1.0], [1.0, -rho], e) * np.sqrt(1 - rho**2)
+    bounds = np.array([0, n // 2, n])
+    L = _bandwidth(r[:, None], bounds)
+    meat = sum(_bartlett(r[a:b, None], L) for a, b in pairwise(bounds))
+    expected = (1 + rho) / (1 - rho)
+    assert float(meat[0, 0]) / n == pytest.approx(expected, rel=0.15)
+    assert L <= 2 if rho == 0 else L > 10
