@@ -70,8 +70,8 @@ def fit(n_records):
 # share of the measurements inside the prediction band is the first check of
 # a band: for this single-record model it is far below 95 %. The residuals on
 # the training record are mostly the model's error, not noise, and the model
-# errs more on a new record than on its training record; the delta method
-# sees neither (see :ref:`uncertainty`).
+# errs more on a new record than on its training record, which a band from
+# the training records alone cannot foresee (see :ref:`uncertainty`).
 models = {1: fit(1)}
 mean, std = models[1].simulate(X[test], return_std=True)
 _, std_conf = models[1].simulate(X[test], return_std=True, interval="confidence")
@@ -148,10 +148,10 @@ print(f"median standard deviation outside it {outside_sd:.2e}")
 # training residuals for white noise. An ensemble of models refitted to
 # records drawn with replacement (a bootstrap by experiment) assumes neither;
 # where the two spreads agree, the delta method can be trusted. Here the
-# bootstrap spread is an order of magnitude wider: the weights of this
-# network are far less determined than the curvature of the training loss
-# suggests, and the delta-method band should be read as a lower bound. Four
-# members keep this example short; use more for a real check.
+# bootstrap spread is about twice as wide: the weights of this network are
+# less determined than the curvature of the training loss suggests, and the
+# delta-method band is best read as a lower bound. Four members keep this
+# example short; use more for a real check.
 mean_e, std_e = ensemble_std(
     ISSMRegressor(n_init=1, random_state=0),
     X[:5],
