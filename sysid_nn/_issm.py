@@ -164,8 +164,9 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     input_delay : int, default=1
         Delay ``n_k`` of the excitation seen by the network; 0 gives direct
         feed-through of ``F(t)``.
-    hidden_layer_sizes : tuple of int, default=(7,)
-        Sizes of the hidden layers; ``()`` gives the linear innovation model.
+    hidden_layer_sizes : int or tuple of int, default=(7,)
+        Sizes of the hidden layers (an int is one layer, as in
+        ``MLPRegressor``); ``()`` gives the linear innovation model.
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_part : bool, default=True
@@ -448,6 +449,16 @@ default=None
     def _history_length(self) -> int:
         return max(1, self.input_delay)
 
+    def _arx_lags(self) -> int:
+        """Lags of the ARX fit the linear start is realised from."""
+        return max(_ARX_LAGS, ceil(self.n_states_ / self.n_outputs_))
+
+    def _lag_reach(self) -> int:
+        # The linear start reads further back than the recurrence: the ARX
+        # fit, or the TDL network with _ARX_LAGS lags.
+        lags = _ARX_LAGS if self.init == "tdl" else self._arx_lags()
+        return max(self._history_length(), lags, self.input_delay + lags - 1)
+
     def _validate_outputs(self) -> None:
         p = self.n_outputs_
         if self.init == "tdl":
@@ -465,11 +476,11 @@ default=None
     def _sizes(self) -> np.ndarray:
         n = self.n_states_
         n_z = n + self.n_features_in_ + self.n_outputs_
-        return np.array([n_z, *self.hidden_layer_sizes, n], dtype=np.int64)
+        return np.array([n_z, *self._hidden_layers(), n], dtype=np.int64)
 
     def _bypass(self) -> bool:
         # Without hidden layers the network is the linear part already.
-        return bool(self.linear_part) and len(self.hidden_layer_sizes) > 0
+        return bool(self.linear_part) and len(self._hidden_layers()) > 0
 
     def _history(self, n_seq, initial):
         h = self._history_length()
@@ -550,7 +561,7 @@ default=None
                 f"{n} here ({_ARX_LAGS} x {p} outputs + {_ARX_LAGS - 1} x {m} "
                 f"inputs); got n_states={self.n_states}. Use n_states=None."
             )
-        if not self.linear_part and self.hidden_layer_sizes:
+        if not self.linear_part and self._hidden_layers():
             raise ValueError(
                 'init="tdl" needs linear_part=True: the states holding past '
                 "outputs and inputs are shifted by the linear part."
@@ -691,7 +702,7 @@ default=None
             self._tdl_weights, self.linear_model_ = self._realise_tdl(self.tdl_)
             return
         p, n, nk = self.n_outputs_, self.n_states_, self.input_delay
-        lags = max(_ARX_LAGS, ceil(n / p))
+        lags = self._arx_lags()
         A_i, B_j, c, rows = self._arx(data, lags)
         # Observer-form ARX states along the data: block i is the part of
         # the prediction of y(t + i) already fixed by data up to t - 1, so

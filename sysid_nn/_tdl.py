@@ -57,8 +57,9 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     input_delay : int, default=1
         Delay ``n_k`` of the newest excitation sample; 0 gives direct
         feed-through of ``F(t)``.
-    hidden_layer_sizes : tuple of int, default=(9,)
-        Sizes of the hidden layers; ``()`` gives the linear model.
+    hidden_layer_sizes : int or tuple of int, default=(9,)
+        Sizes of the hidden layers (an int is one layer, as in
+        ``MLPRegressor``); ``()`` gives the linear model.
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_bypass : bool, default=True
@@ -270,12 +271,12 @@ such, default=None
             self.output_lags * self.n_outputs_ + self.input_lags * self.n_features_in_
         )
         return np.array(
-            [n_reg, *self.hidden_layer_sizes, self.n_outputs_], dtype=np.int64
+            [n_reg, *self._hidden_layers(), self.n_outputs_], dtype=np.int64
         )
 
     def _bypass(self) -> bool:
         # Without hidden layers the network is linear already.
-        return bool(self.linear_bypass) and len(self.hidden_layer_sizes) > 0
+        return bool(self.linear_bypass) and len(self._hidden_layers()) > 0
 
     def _history(self, n_seq, initial):
         h = self._history_length()

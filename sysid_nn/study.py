@@ -1504,7 +1504,15 @@ def run_validation(
     >>> sorted(p.name for p in out.glob("*.csv"))
     ['results.csv', 'summary.csv']
     """
-    config = StudyConfig(n_jobs=n_jobs, max_lag=max_lag, alpha=alpha)
+    # The residual tests' lags are checked against these records, not the study's.
+    shortest = min(len(x) for x in records[model.inputs[0]])
+    config = StudyConfig(
+        n_jobs=n_jobs,
+        max_lag=max_lag,
+        alpha=alpha,
+        n_samples=shortest,
+        paper_tdl_step=model.step,
+    )
     models = {"model": model}
     data = Bunch(test=records, dt=float(dt))
     with _staged_directory(out_dir, overwrite) as tmp:
