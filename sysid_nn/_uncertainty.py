@@ -212,6 +212,7 @@ def fit_covariance(est, train) -> None:
         est.n_effective_params_ = np.nan
         est.noise_variance_ = nan
         est.one_step_noise_variance_ = nan
+        est._noise_units = (nan, nan)
         est._cov_root = np.full((1, n_w), np.nan)
         return
     if getattr(est, "init", None) == "tdl":
@@ -244,13 +245,17 @@ def fit_covariance(est, train) -> None:
         cov[np.ix_(idx, idx)] = cov_k
         n_eff += n_k
     cov = 0.5 * (cov + cov.T)
-    scale2 = est._y_scale**2
     est.coefs_covariance_ = cov
     est.n_effective_params_ = n_eff
-    est.noise_variance_ = _residual_variance(free, n_eff, p) * scale2
-    est.one_step_noise_variance_ = (
-        _residual_variance(one, n_eff, p) * scale2 if one is not None else nan
+    # Kept in standardised units too: squared user units may overflow.
+    est._noise_units = (
+        _residual_variance(free, n_eff, p),
+        _residual_variance(one, n_eff, p) if one is not None else nan,
     )
+    with np.errstate(over="ignore"):
+        scale2 = est._y_scale**2
+        est.noise_variance_ = est._noise_units[0] * scale2
+        est.one_step_noise_variance_ = est._noise_units[1] * scale2
     est._cov_root = _square_root(cov)
 
 
@@ -293,11 +298,10 @@ def output_std(est, Yhat, J, data, as_list, y_1d, interval, one_step=False):
     rows = data.modelled
     var = np.empty(len(J))
     row_variances(J, est._cov_root, var)
-    var = var.reshape(len(rows), p) * est._y_scale**2
+    var = var.reshape(len(rows), p)
     if interval == "prediction":
-        noise = est.one_step_noise_variance_ if one_step else est.noise_variance_
-        var = var + noise
-    std = np.sqrt(var)
+        var = var + est._noise_units[1 if one_step else 0]
+    std = np.sqrt(var) * est._y_scale
     std[np.isnan(Yhat[rows]).any(axis=1)] = np.nan
     out, k = [], 0
     for a, b in pairwise(data.starts):
