@@ -32,6 +32,7 @@ from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
+from sysid_nn import _uncertainty
 from sysid_nn._progress import report_stage
 from sysid_nn._validation import check_same_width
 
@@ -552,6 +553,7 @@ class _RecurrentRegressorBase(BaseEstimator):
             self.restart_scores_ = np.array([-r.score for r in runs])
             self.fit_time_ = time.perf_counter() - start
             self._after_fit(train, val)
+            _uncertainty.fit_covariance(self, train)
         if not chosen.converged:
             warnings.warn(
                 f"{type(self).__name__} stopped after max_iter={self.max_iter} "
@@ -685,18 +687,32 @@ class _RecurrentRegressorBase(BaseEstimator):
         )
 
     # ----------------------------------------------------------- predicting
-    def _simulate(self, X, initial, initial_name: str, initial_inputs=None):
+    def _simulate(
+        self,
+        X,
+        initial,
+        initial_name: str,
+        initial_inputs=None,
+        return_std=False,
+        interval="prediction",
+    ):
         check_is_fitted(self, "coefs_")
         Xs, _, as_list, _ = self._validate_Xy(X, reset=False, y_required=False)
         self._check_lengths(Xs, 1)
         initial = self._check_initial(initial, len(Xs), as_list, initial_name)
         past = self._check_initial_inputs(initial_inputs, len(Xs), as_list)
         data = self._stack(Xs, None, initial, past)
-        Yhat, _, diverged, _ = self._run(self.coefs_, data, _FREE_RUN, False)
+        Yhat, J, diverged, _ = self._run(self.coefs_, data, _FREE_RUN, return_std)
         self._warn_divergence(diverged, as_list)
-        return self._unstack(Yhat, data, as_list, self._y_1d)
+        y_sim = self._unstack(Yhat, data, as_list, self._y_1d)
+        if not return_std:
+            return y_sim
+        std = _uncertainty.output_std(
+            self, Yhat, J, data, as_list, self._y_1d, interval
+        )
+        return y_sim, std
 
-    def predict(self, X, y=None, *, horizon=1):
+    def predict(self, X, y=None, *, horizon=1, return_std=False, interval="prediction"):
         """Predict the response, from measured outputs when they are given.
 
         Parameters
@@ -713,12 +729,26 @@ default=None
             what :meth:`score` and scikit-learn's model selection see.
         horizon : int, default=1
             Prediction horizon in samples (only used with ``y``).
+        return_std : bool, default=False
+            Also return the standard deviation of every sample (delta
+            method, see :ref:`uncertainty`); available for the free run and
+            for ``horizon=1``.
+        interval : {"prediction", "confidence"}, default="prediction"
+            What the standard deviation is of (only used with
+            ``return_std``): ``"prediction"``, a new measurement (weight
+            uncertainty plus the residual noise variance of the training
+            records, ``one_step_noise_variance_`` with ``y``,
+            ``noise_variance_`` without); ``"confidence"``, the model output
+            (weight uncertainty only).
 
         Returns
         -------
         y_pred : ndarray or list of ndarray
             Same shape as ``y`` (or as the training targets); a list for a
             list.
+        y_std : ndarray or list of ndarray
+            Standard deviation of each value of ``y_pred``, same shape; only
+            with ``return_std=True``.
         """
         if (
             isinstance(horizon, bool)
@@ -727,14 +757,28 @@ default=None
         ):
             raise ValueError(f"horizon must be a positive integer; got {horizon!r}.")
         if y is None:
-            return self._simulate(X, None, "initial")
+            return self._simulate(
+                X, None, "initial", return_std=return_std, interval=interval
+            )
         check_is_fitted(self, "coefs_")
+        if return_std and horizon != 1:
+            raise ValueError(
+                f"return_std=True is available for horizon=1 and for the free run "
+                f"(y=None); got horizon={horizon}."
+            )
         Xs, ys, as_list, y_1d = self._validate_Xy(X, y, reset=False, y_required=True)
         self._check_lengths(Xs, 1)
         data = self._stack(Xs, ys)
         Yhat = self._run_horizon(self.coefs_, data, int(horizon))
         self._mark_out_of_range(Yhat, data, as_list, f"{horizon}-step prediction")
-        return self._unstack(Yhat, data, as_list, y_1d)
+        y_pred = self._unstack(Yhat, data, as_list, y_1d)
+        if not return_std:
+            return y_pred
+        J = self._run(self.coefs_, data, 1, True)[1]
+        std = _uncertainty.output_std(
+            self, Yhat, J, data, as_list, y_1d, interval, one_step=True
+        )
+        return y_pred, std
 
     def score(self, X, y, sample_weight=None):
         """Coefficient of determination R^2 of the free-run simulation.

@@ -24,6 +24,7 @@ from sysid_nn._base import (
 from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_run
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._tdl import TDLRegressor
+from sysid_nn._uncertainty import output_std
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]
 
@@ -237,6 +238,20 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         Negative selection loss of every restart.
     fit_time_ : float
         Seconds spent in training.
+    coefs_covariance_ : ndarray of shape (n_coefs, n_coefs)
+        Delta-method covariance of ``coefs_`` (standardised units): from the
+        Jacobian of the final training objective, the innovation weights
+        refitted after a simulation-focused fit from the one-step Jacobian,
+        and with ``init="tdl"`` the TDL network's covariance mapped through
+        the realisation; see :ref:`uncertainty`.
+    n_effective_params_ : float
+        Effective number of weights the data determine (the trace of the
+        hat matrix), used to correct the residual variances.
+    noise_variance_ : ndarray of shape (n_outputs,)
+        Residual variance of the free run on the training records (user's
+        units), corrected for ``n_effective_params_``.
+    one_step_noise_variance_ : ndarray of shape (n_outputs,)
+        The same for the one-step predictor.
     feature_names_in_ : ndarray
         Column names of ``X`` when it was a DataFrame.
 
@@ -320,7 +335,15 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     score = _RecurrentRegressorBase.score
 
     # -------------------------------------------------------------- public
-    def simulate(self, X, *, initial_state=None, initial_inputs=None):
+    def simulate(
+        self,
+        X,
+        *,
+        initial_state=None,
+        initial_inputs=None,
+        return_std=False,
+        interval="prediction",
+    ):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
         The innovations are zero throughout (``E = 0``).
@@ -340,17 +363,34 @@ such, default=None
             Measured excitation just before the first sample, oldest first
             (1-D for one input). Default: zero excitation before the start.
             Only the last ``input_delay`` rows are used.
+        return_std : bool, default=False
+            Also return the standard deviation of every sample (delta
+            method, see :ref:`uncertainty`).
+        interval : {"prediction", "confidence"}, default="prediction"
+            What the standard deviation is of (only used with
+            ``return_std``): ``"prediction"``, a new measurement (weight
+            uncertainty plus ``noise_variance_``); ``"confidence"``, the
+            model output (weight uncertainty only).
 
         Returns
         -------
         y_sim : ndarray or list of ndarray
             Simulated response; NaN from a sample where the run diverged (a
             :class:`~sysid_nn.DivergenceWarning` says where).
+        y_std : ndarray or list of ndarray
+            Standard deviation of each value of ``y_sim``, same shape; only
+            with ``return_std=True``.
         """
         data, X0, as_list = self._prepare_call(X, None, initial_state, initial_inputs)
-        Yhat, _, diverged, _ = self._run_from(self.coefs_, data, _FREE_RUN, False, X0)
+        Yhat, J, diverged, _ = self._run_from(
+            self.coefs_, data, _FREE_RUN, return_std, X0
+        )
         self._warn_divergence(diverged, as_list, stacklevel=3)
-        return self._unstack(Yhat, data, as_list, self._y_1d)
+        y_sim = self._unstack(Yhat, data, as_list, self._y_1d)
+        if not return_std:
+            return y_sim
+        std = output_std(self, Yhat, J, data, as_list, self._y_1d, interval)
+        return y_sim, std
 
     def predict_states(self, X, y=None, *, initial_state=None) -> Bunch | list[Bunch]:
         """All states and the linearisation of eq. 12 along a trajectory.

@@ -947,8 +947,54 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
         metavar="M",
         help="largest lag of the residual tests; at most (shortest record - 10) / 2",
     )
+    p.add_argument(
+        "--band",
+        type=_band_level,
+        default=None,
+        metavar="LEVEL",
+        help="also draw each record's free run with its prediction band at this "
+        "level (e.g. 0.95) and report the share of samples inside it "
+        "(band.csv, band_<k>.png in --out)",
+    )
     _add_parallel(p)
     _add_output_flags(p, "--out directory")
+
+
+_band_level = _bounded(
+    float, lambda v: 0 < v < 1, "a level between 0 and 1 (e.g. 0.95)"
+)
+
+
+def _write_bands(model, records, out: Path, dt: float, level: float) -> float:
+    """Free runs with their prediction bands: figures, band.csv, pooled coverage."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    import pandas as pd
+
+    from sysid_nn.plotting import plot_band
+    from sysid_nn.uncertainty import interval_coverage, normal_interval
+
+    X, y = model.arrays(records)
+    mean, std = model.estimator.simulate(X, return_std=True)
+    rows, bounds = [], []
+    for k, (yk, mk, sk) in enumerate(zip(y, mean, std, strict=True)):
+        yk, mk, sk = (np.reshape(a, (len(a), -1)) for a in (yk, mk, sk))
+        lower, upper = normal_interval(mk, sk, level)
+        bounds.append((yk, lower, upper))
+        rows.append({"record": k, "coverage": interval_coverage(yk, lower, upper)})
+        t = dt * np.arange(len(yk))
+        ax = plot_band(t, mk[:, 0], sk[:, 0], level=level, label="simulated")
+        ax.plot(t, yk[:, 0], "k-", linewidth=0.6, label="measured")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(model.outputs[0])
+        ax.legend()
+        ax.figure.savefig(out / f"band_{k}.png", dpi=90)
+        plt.close(ax.figure)
+    pd.DataFrame(rows).to_csv(out / "band.csv", index=False)
+    return interval_coverage(*(list(b) for b in zip(*bounds, strict=True)))
 
 
 def _load_model(path: Path):
@@ -1031,6 +1077,13 @@ def _run_validate(args: argparse.Namespace) -> int:
             )
         )
         print(f"wrote {result.out_dir}/report.md, results.csv, summary.csv and figures")
+    if args.band is not None:
+        coverage = _write_bands(model, records.columns, result.out_dir, dt, args.band)
+        if not args.quiet:
+            print(
+                f"{100 * args.band:g} % prediction band of the free run covers "
+                f"{100 * coverage:.1f} % of the samples (band.csv, band_<k>.png)"
+            )
     return 0
 
 

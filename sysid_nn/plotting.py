@@ -33,6 +33,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "panel_figure",
     "plot_autocorrelation",
+    "plot_band",
     "plot_cross_correlation",
     "plot_error_statistics",
     "plot_hysteresis",
@@ -576,3 +577,68 @@ def plot_residual_analysis(
     )
     top.figure.tight_layout()
     return top.figure
+
+
+def plot_band(
+    t: Any,
+    mean: Any,
+    std: Any,
+    *,
+    level: float = 0.95,
+    label: str = "model",
+    color: str | None = None,
+    ax: Axes | None = None,
+) -> Axes:
+    """Predicted or simulated response with its shaded interval.
+
+    Parameters
+    ----------
+    t : array-like of shape (n_samples,)
+        Time.
+    mean : array-like of shape (n_samples,)
+        Predicted or simulated response, drawn as a line.
+    std : array-like of shape (n_samples,)
+        Its standard deviation, as returned with ``return_std=True``.
+    level : float, default=0.95
+        Level of the Gaussian interval shaded around ``mean`` (see
+        :func:`sysid_nn.uncertainty.normal_interval`).
+    label : str, default="model"
+        Legend text of the line; the band is labelled with its level.
+    color : str, optional
+        Colour of the line and the band; the next colour of the Axes if None.
+    ax : Axes, optional
+        Axes to draw on; a new figure if None.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The Axes drawn on.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.linspace(0, 1, 50)
+    >>> ax = plot_band(t, np.sin(t), np.full(50, 0.1), level=0.9)
+    >>> [line.get_label() for line in ax.get_lines()]
+    ['model']
+    >>> len(ax.collections)
+    1
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close(ax.figure)
+    """
+    from sysid_nn.uncertainty import normal_interval
+
+    ax = _new_axes(ax)
+    mean = np.asarray(mean, dtype=float)
+    lower, upper = normal_interval(mean, np.asarray(std, dtype=float), level)
+    (line,) = ax.plot(t, mean, "-", linewidth=1.0, color=color, label=label)
+    ax.fill_between(
+        t,
+        lower,
+        upper,
+        color=line.get_color(),
+        alpha=0.25,
+        linewidth=0.0,
+        label=f"{100 * level:g} % interval",
+    )
+    return ax
