@@ -163,8 +163,9 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     input_delay : int, default=1
         Delay ``n_k`` of the excitation seen by the network; 0 gives direct
         feed-through of ``F(t)``.
-    hidden_layer_sizes : tuple of int, default=(7,)
-        Sizes of the hidden layers; ``()`` gives the linear innovation model.
+    hidden_layer_sizes : int or tuple of int, default=(7,)
+        Sizes of the hidden layers (an int is one layer, as in
+        ``MLPRegressor``); ``()`` gives the linear innovation model.
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_part : bool, default=True
@@ -242,6 +243,20 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         estimate). With one output, ``fit`` warns when it swamps the
         output's second difference, where the dynamics show at fine
         sampling (with displacement alone the ISSM then loses its gain).
+    coefs_covariance_ : ndarray of shape (n_coefs, n_coefs)
+        Delta-method covariance of ``coefs_`` (standardised units): from the
+        Jacobian of the final training objective, the innovation weights
+        refitted after a simulation-focused fit from the one-step Jacobian,
+        and with ``init="tdl"`` the TDL network's covariance mapped through
+        the realisation; see :ref:`uncertainty`.
+    n_effective_params_ : float
+        Effective number of weights the data determine (the trace of the
+        hat matrix), used to correct the residual variances.
+    noise_variance_ : ndarray of shape (n_outputs,)
+        Residual variance of the free run on the training records (user's
+        units), corrected for ``n_effective_params_``.
+    one_step_noise_variance_ : ndarray of shape (n_outputs,)
+        The same for the one-step predictor.
     feature_names_in_ : ndarray
         Column names of ``X`` when it was a DataFrame.
 
@@ -325,7 +340,16 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     score = _RecurrentRegressorBase.score
 
     # -------------------------------------------------------------- public
-    def simulate(self, X, *, initial_state=None, initial_inputs=None, y_init=None):
+    def simulate(
+        self,
+        X,
+        *,
+        initial_state=None,
+        initial_inputs=None,
+        return_std=False,
+        interval="prediction",
+        y_init=None,
+    ):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
         The innovations are zero throughout (``E = 0``).
@@ -357,15 +381,32 @@ such, default=None
             ``initial_state``. :meth:`predict_states` gives the one-step
             predictor's (filter's) estimate instead, which follows each
             measurement more closely.
+        return_std : bool, default=False
+            Also return the standard deviation of every sample (delta
+            method, see :ref:`uncertainty`).
+        interval : {"prediction", "confidence"}, default="prediction"
+            What the standard deviation is of (only used with
+            ``return_std``): ``"prediction"``, a new measurement (weight
+            uncertainty plus ``noise_variance_``); ``"confidence"``, the
+            model output (weight uncertainty only).
 
         Returns
         -------
         y_sim : ndarray or list of ndarray
             Simulated response; NaN from a sample where the run diverged (a
             :class:`~sysid_nn.DivergenceWarning` says where).
+        y_std : ndarray or list of ndarray
+            Standard deviation of each value of ``y_sim``, same shape; only
+            with ``return_std=True``.
         """
         return self._simulate(
-            X, initial_state, "initial_state", initial_inputs, y_init=y_init
+            X,
+            initial_state,
+            "initial_state",
+            initial_inputs,
+            return_std=return_std,
+            interval=interval,
+            y_init=y_init,
         )
 
     def predict_states(self, X, y=None, *, initial_state=None) -> Bunch | list[Bunch]:
@@ -425,6 +466,16 @@ default=None
     def _history_length(self) -> int:
         return max(1, self.input_delay)
 
+    def _arx_lags(self) -> int:
+        """Lags of the ARX fit the linear start is realised from."""
+        return max(_ARX_LAGS, ceil(self.n_states_ / self.n_outputs_))
+
+    def _lag_reach(self) -> int:
+        # The linear start reads further back than the recurrence: the ARX
+        # fit, or the TDL network with _ARX_LAGS lags.
+        lags = _ARX_LAGS if self.init == "tdl" else self._arx_lags()
+        return max(self._history_length(), lags, self.input_delay + lags - 1)
+
     def _validate_outputs(self) -> None:
         p = self.n_outputs_
         if self.init == "tdl":
@@ -442,11 +493,11 @@ default=None
     def _sizes(self) -> np.ndarray:
         n = self.n_states_
         n_z = n + self.n_features_in_ + self.n_outputs_
-        return np.array([n_z, *self.hidden_layer_sizes, n], dtype=np.int64)
+        return np.array([n_z, *self._hidden_layers(), n], dtype=np.int64)
 
     def _bypass(self) -> bool:
         # Without hidden layers the network is the linear part already.
-        return bool(self.linear_part) and len(self.hidden_layer_sizes) > 0
+        return bool(self.linear_part) and len(self._hidden_layers()) > 0
 
     def _history(self, n_seq, initial):
         h = self._history_length()
@@ -491,10 +542,12 @@ default=None
     def _initial_guess(self, y0):
         return np.r_[y0, np.zeros(self.n_states_ - self.n_outputs_)]
 
-    def _free_run(self, data, initial):
+    def _free_run(self, data, initial, want_jac=False):
         X0 = self._initial_states(data, initial)
-        Yhat, _, diverged, _ = self._run_from(self.coefs_, data, _FREE_RUN, False, X0)
-        return Yhat, diverged
+        Yhat, J, diverged, _ = self._run_from(
+            self.coefs_, data, _FREE_RUN, want_jac, X0
+        )
+        return Yhat, J, diverged
 
     def _initial_states(self, data: _Data, initial=None) -> np.ndarray:
         """``X0`` of every sequence: measured part from the history rows."""
@@ -544,7 +597,7 @@ default=None
                 f"{n} here ({_ARX_LAGS} x {p} outputs + {_ARX_LAGS - 1} x {m} "
                 f"inputs); got n_states={self.n_states}. Use n_states=None."
             )
-        if not self.linear_part and self.hidden_layer_sizes:
+        if not self.linear_part and self._hidden_layers():
             raise ValueError(
                 'init="tdl" needs linear_part=True: the states holding past '
                 "outputs and inputs are shifted by the linear part."
@@ -685,7 +738,7 @@ default=None
             self._tdl_weights, self.linear_model_ = self._realise_tdl(self.tdl_)
             return
         p, n, nk = self.n_outputs_, self.n_states_, self.input_delay
-        lags = max(_ARX_LAGS, ceil(n / p))
+        lags = self._arx_lags()
         A_i, B_j, c, rows = self._arx(data, lags)
         # Observer-form ARX states along the data: block i is the part of
         # the prediction of y(t + i) already fixed by data up to t - 1, so

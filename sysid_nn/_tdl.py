@@ -57,8 +57,9 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     input_delay : int, default=1
         Delay ``n_k`` of the newest excitation sample; 0 gives direct
         feed-through of ``F(t)``.
-    hidden_layer_sizes : tuple of int, default=(9,)
-        Sizes of the hidden layers; ``()`` gives the linear model.
+    hidden_layer_sizes : int or tuple of int, default=(9,)
+        Sizes of the hidden layers (an int is one layer, as in
+        ``MLPRegressor``); ``()`` gives the linear model.
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_bypass : bool, default=True
@@ -109,6 +110,17 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         records alone (residuals of a linear one-step model; an upper
         estimate). ``fit`` warns when it swamps the outputs' second
         difference, where the dynamics show at fine sampling.
+    coefs_covariance_ : ndarray of shape (n_coefs, n_coefs)
+        Delta-method covariance of ``coefs_`` (standardised units), from the
+        Jacobian of the final training objective; see :ref:`uncertainty`.
+    n_effective_params_ : float
+        Effective number of weights the data determine (the trace of the
+        hat matrix), used to correct the residual variances.
+    noise_variance_ : ndarray of shape (n_outputs,)
+        Residual variance of the free run on the training records (user's
+        units), corrected for ``n_effective_params_``.
+    one_step_noise_variance_ : ndarray of shape (n_outputs,)
+        The same for the one-step predictor.
     feature_names_in_ : ndarray
         Column names of ``X`` when it was a DataFrame.
 
@@ -191,7 +203,16 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     score = _RecurrentRegressorBase.score
 
     # -------------------------------------------------------------- public
-    def simulate(self, X, *, initial_outputs=None, initial_inputs=None, y_init=None):
+    def simulate(
+        self,
+        X,
+        *,
+        initial_outputs=None,
+        initial_inputs=None,
+        return_std=False,
+        interval="prediction",
+        y_init=None,
+    ):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
         Parameters
@@ -220,12 +241,23 @@ such, default=None
             noise into the run). The
             whole record is simulated from the estimate; score it after the
             window. Not together with ``initial_outputs``.
+        return_std : bool, default=False
+            Also return the standard deviation of every sample (delta
+            method, see :ref:`uncertainty`).
+        interval : {"prediction", "confidence"}, default="prediction"
+            What the standard deviation is of (only used with
+            ``return_std``): ``"prediction"``, a new measurement (weight
+            uncertainty plus ``noise_variance_``); ``"confidence"``, the
+            model output (weight uncertainty only).
 
         Returns
         -------
         y_sim : ndarray or list of ndarray
             Simulated response; NaN from a sample where the run diverged (a
             :class:`~sysid_nn.DivergenceWarning` says where).
+        y_std : ndarray or list of ndarray
+            Standard deviation of each value of ``y_sim``, same shape; only
+            with ``return_std=True``.
 
         Examples
         --------
@@ -246,7 +278,13 @@ such, default=None
         True
         """
         return self._simulate(
-            X, initial_outputs, "initial_outputs", initial_inputs, y_init=y_init
+            X,
+            initial_outputs,
+            "initial_outputs",
+            initial_inputs,
+            return_std=return_std,
+            interval=interval,
+            y_init=y_init,
         )
 
     # ---------------------------------------------------------- structure
@@ -258,12 +296,12 @@ such, default=None
             self.output_lags * self.n_outputs_ + self.input_lags * self.n_features_in_
         )
         return np.array(
-            [n_reg, *self.hidden_layer_sizes, self.n_outputs_], dtype=np.int64
+            [n_reg, *self._hidden_layers(), self.n_outputs_], dtype=np.int64
         )
 
     def _bypass(self) -> bool:
         # Without hidden layers the network is linear already.
-        return bool(self.linear_bypass) and len(self.hidden_layer_sizes) > 0
+        return bool(self.linear_bypass) and len(self._hidden_layers()) > 0
 
     def _history(self, n_seq, initial):
         h = self._history_length()
