@@ -346,9 +346,9 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         *,
         initial_state=None,
         initial_inputs=None,
+        y_init=None,
         return_std=False,
         interval="prediction",
-        y_init=None,
     ):
         """Free-run simulation from the excitation alone (paper section 4.4).
 

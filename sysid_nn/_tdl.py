@@ -209,9 +209,9 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         *,
         initial_outputs=None,
         initial_inputs=None,
+        y_init=None,
         return_std=False,
         interval="prediction",
-        y_init=None,
     ):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
