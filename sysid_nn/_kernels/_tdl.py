@@ -21,6 +21,17 @@ import numpy as np
 from numba import njit
 
 from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp, out_of_range
+from sysid_nn._kernels._recurrence import (
+    FULL_JAC,
+    NO_JAC,
+    NORMAL,
+    add_row,
+    copy_rows,
+    fill_rows,
+    finish,
+    keep_step,
+    new_block,
+)
 
 
 @njit(cache=True, inline="always")
@@ -59,86 +70,64 @@ def _rmatvec(S, x, out):
 
 @njit(cache=True)
 def tdl_run(
-    w,
-    sizes,
-    act,
-    bypass,
-    S,
-    Y,
-    U,
-    starts,
-    h,
-    na,
-    nb,
-    nk,
-    seg_len,
-    bound,
-    want_jac,
-    Yhat,
-    J,
-    Z,
-    A,
-    diverged,
-):
-    """Run the recurrence; optionally fill the Jacobian of the modelled rows.
+    w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, jac,
+    Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
+):  # fmt: skip
+    """Run the recurrence; optionally its Jacobian or normal equations.
 
     ``Yhat`` receives the outputs (history rows copied from ``Y``; NaN after
-    a divergence). ``J`` (``(n_modelled_rows * n_out, n_w)``) receives
-    ``d yhat / d w`` by forward sensitivities when ``want_jac``. ``Z`` and
-    ``A`` (per-row network inputs and hidden activations) are kept for the
-    adjoint pass. ``diverged[s]`` is the first modelled index of sequence
-    ``s`` whose output left ``[-bound, bound]``, or -1.
+    a divergence). ``jac`` is a mode of :mod:`._recurrence`: with
+    ``FULL_JAC``, ``J`` (``(n_modelled_rows * n_out, n_w)``) receives ``d
+    yhat / d w`` by forward sensitivities; with ``NORMAL``, ``J`` is a ring
+    of the last ``na + 1`` steps' rows (``((na + 1) * n_out, n_w)``) and
+    ``JtJ``, ``Jtr`` receive the sums over all rows of ``J' J`` and ``J'
+    (yhat - y)`` (``syrk`` is :data:`._recurrence.SYRK`). ``Z`` and ``A``
+    (per-row network inputs and hidden activations) are kept for the adjoint
+    pass when they have rows. ``diverged[s]`` is the first modelled index of
+    sequence ``s`` whose output left ``[-bound, bound]``, or -1.
     """
     n_out = Y.shape[1]
-    n_reg = S.shape[1]
     n_z = sizes[0]
     n_w = w.shape[0]
     width = np.max(sizes)
-    n_a = A.shape[1]
-    phi = np.empty(n_reg)
+    phi = np.empty(S.shape[1])
     z = np.empty(n_z)
-    acts = np.zeros(n_a)
-    gw = np.empty(n_w)
+    acts = np.zeros(max(1, A.shape[1]))
     out = np.empty(n_out)
     v = np.zeros(n_out)
     gz = np.empty(n_z)
-    gphi = np.empty(n_reg)
+    gphi = np.empty(S.shape[1])
     d1 = np.empty(width)
     d2 = np.empty(width)
+    Jb, rb = new_block(n_w, jac)
+    m = 0
+    ring = na + 1
     row_base = 0
     for s in range(starts.shape[0] - 1):
         a = starts[s]
         b = starts[s + 1]
         diverged[s] = -1
-        for t in range(a, a + h):
-            for k in range(n_out):
-                Yhat[t, k] = Y[t, k]
+        copy_rows(Yhat, Y, a, a + h)
         seg_start = a + h
         for t in range(a + h, b):
-            if (t - a - h) % seg_len == 0:
+            local = t - a - h
+            if local % seg_len == 0:
                 seg_start = t
             _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi)
             _matvec(S, phi, z)
             mlp_forward(w, sizes, act, bypass, z, acts, out)
-            # Kept per row for the adjoint pass; copied from contiguous
-            # scratch buffers rather than writing through per-row views.
-            for i in range(n_z):
-                Z[t, i] = z[i]
-            for i in range(n_a):
-                A[t, i] = acts[i]
+            keep_step(Z, A, t, z, acts)
             if out_of_range(out, bound):
-                diverged[s] = t - a - h
-                for tt in range(t, b):
-                    for k in range(n_out):
-                        Yhat[tt, k] = np.nan
+                diverged[s] = local
+                fill_rows(Yhat, t, b, np.full(n_out, np.nan))
                 break
             for k in range(n_out):
                 Yhat[t, k] = out[k]
-            if not want_jac:
+            if jac == NO_JAC:
                 continue
-            r0 = row_base + (t - a - h) * n_out
+            r0 = row_base + local * n_out if jac == FULL_JAC else (local % ring) * n_out
             for j in range(n_out):
-                row = r0 + j
+                gw = J[r0 + j]
                 gw[:] = 0.0
                 v[:] = 0.0
                 v[j] = 1.0
@@ -150,15 +139,19 @@ def tdl_run(
                     src = t - i
                     if src < seg_start:
                         break
-                    srow = row_base + (src - a - h) * n_out
+                    if jac == FULL_JAC:
+                        srow = row_base + (src - a - h) * n_out
+                    else:
+                        srow = ((src - a - h) % ring) * n_out
                     for k in range(n_out):
                         coef = gphi[(i - 1) * n_out + k]
                         if coef != 0.0:
                             for c in range(n_w):
                                 gw[c] += coef * J[srow + k, c]
-                for c in range(n_w):
-                    J[row, c] = gw[c]
+                if jac == NORMAL:
+                    m = add_row(gw, out[j] - Y[t, j], Jb, rb, m, JtJ, Jtr, syrk)
         row_base += (b - a - h) * n_out
+    finish(Jb, rb, m, JtJ, Jtr, syrk)
 
 
 @njit(cache=True)
