@@ -40,8 +40,9 @@ def _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi):
     n_in = U.shape[1]
     for i in range(1, na + 1):
         src = t - i
+        fed = Yhat if src >= seg_start else Y
         for k in range(n_out):
-            phi[(i - 1) * n_out + k] = Yhat[src, k] if src >= seg_start else Y[src, k]
+            phi[(i - 1) * n_out + k] = fed[src, k]
     base = na * n_out
     for i in range(nb):
         for k in range(n_in):
@@ -66,6 +67,32 @@ def _rmatvec(S, x, out):
         if xr != 0.0:
             for c in range(S.shape[1]):
                 out[c] += S[r, c] * xr
+
+
+@njit(cache=True)
+def _sensitivity_rows(
+    w, sizes, act, bypass, S, z, acts, J, r0, lag_rows, n_fed, v, gz, gphi, d1, d2
+):  # fmt: skip
+    """Rows ``J[r0:r0 + n_out]`` of one step by forward sensitivities (eq. 6).
+
+    The direct derivative of the network plus, carried through the delay
+    line, those of the ``n_fed`` fed-back outputs at rows ``lag_rows``.
+    """
+    n_out = v.shape[0]
+    for j in range(n_out):
+        gw = J[r0 + j]
+        gw[:] = 0.0
+        v[:] = 0.0
+        v[j] = 1.0
+        mlp_vjp(w, sizes, act, bypass, z, acts, v, gw, gz, d1, d2)
+        _rmatvec(S, gz, gphi)
+        for i in range(n_fed):
+            srow = lag_rows[i]
+            for k in range(n_out):
+                coef = gphi[i * n_out + k]
+                if coef != 0.0:
+                    for c in range(gw.shape[0]):
+                        gw[c] += coef * J[srow + k, c]
 
 
 @njit(cache=True)
@@ -102,6 +129,7 @@ def tdl_run(
     Jb, rb = new_block(n_w, jac)
     m = 0
     ring = na + 1
+    lag_rows = np.empty(max(1, na), dtype=np.int64)
     row_base = 0
     for s in range(starts.shape[0] - 1):
         a = starts[s]
@@ -110,46 +138,37 @@ def tdl_run(
         copy_rows(Yhat, Y, a, a + h)
         seg_start = a + h
         for t in range(a + h, b):
-            local = t - a - h
-            if local % seg_len == 0:
+            if t - seg_start == seg_len:
                 seg_start = t
             _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi)
             _matvec(S, phi, z)
             mlp_forward(w, sizes, act, bypass, z, acts, out)
             keep_step(Z, A, t, z, acts)
             if out_of_range(out, bound):
-                diverged[s] = local
+                diverged[s] = t - a - h
                 fill_rows(Yhat, t, b, np.full(n_out, np.nan))
                 break
             for k in range(n_out):
                 Yhat[t, k] = out[k]
             if jac == NO_JAC:
                 continue
-            r0 = row_base + local * n_out if jac == FULL_JAC else (local % ring) * n_out
-            for j in range(n_out):
-                gw = J[r0 + j]
-                gw[:] = 0.0
-                v[:] = 0.0
-                v[j] = 1.0
-                mlp_vjp(w, sizes, act, bypass, z, acts, v, gw, gz, d1, d2)
-                _rmatvec(S, gz, gphi)
-                # Eq. 6 carried through the delay line: add the sensitivities
-                # of the fed-back outputs of this segment.
-                for i in range(1, na + 1):
-                    src = t - i
-                    if src < seg_start:
-                        break
-                    if jac == FULL_JAC:
-                        srow = row_base + (src - a - h) * n_out
-                    else:
-                        srow = ((src - a - h) % ring) * n_out
-                    for k in range(n_out):
-                        coef = gphi[(i - 1) * n_out + k]
-                        if coef != 0.0:
-                            for c in range(n_w):
-                                gw[c] += coef * J[srow + k, c]
-                if jac == NORMAL:
-                    m = add_row(gw, out[j] - Y[t, j], Jb, rb, m, JtJ, Jtr, syrk)
+            local = t - a - h
+            slot = local % ring  # of this step's rows in the ring (NORMAL)
+            r0 = row_base + local * n_out if jac == FULL_JAC else slot * n_out
+            # Rows of the fed-back outputs of this segment, newest first.
+            n_fed = min(na, t - seg_start)
+            for i in range(1, n_fed + 1):
+                if jac == FULL_JAC:
+                    lag_rows[i - 1] = r0 - i * n_out
+                else:
+                    lag_rows[i - 1] = (slot - i + (ring if slot < i else 0)) * n_out
+            _sensitivity_rows(
+                w, sizes, act, bypass, S, z, acts, J, r0, lag_rows, n_fed, v, gz,
+                gphi, d1, d2,
+            )  # fmt: skip
+            if jac == NORMAL:
+                for j in range(n_out):
+                    m = add_row(J[r0 + j], out[j] - Y[t, j], Jb, rb, m, JtJ, Jtr, syrk)
         row_base += (b - a - h) * n_out
     finish(Jb, rb, m, JtJ, Jtr, syrk)
 
