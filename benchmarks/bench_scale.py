@@ -1,0 +1,342 @@
+"""Fit time and peak memory against the record length, and where the time goes.
+
+Cases, each fitted in a fresh subprocess (so that peak memory is its own):
+
+- one hysteretic-oscillator record of N = 10^3, 10^4, 10^5 (and, with
+  ``--large``, 10^6) samples at dt = 0.01 s (100 samples per fundamental
+  period of the linear oscillator), the excitation's modulation stretched so
+  that its intensity is nearly constant over the record; displacement
+  measured; ``TDLRegressor()`` and ``ISSMRegressor()`` with their defaults
+  (``random_state=0``);
+- the two-output field shape: 11 records x 7200 samples, displacement and
+  velocity measured, dt = 1/170 s (about 170 samples per fundamental
+  period), for both networks.
+
+For each fit: wall time, peak resident memory above the level before the fit
+(``ru_maxrss``; it includes the numba kernels' own allocations, which
+``tracemalloc`` does not see), and per stage of every restart the iterations,
+the time, and how it splits between the solver's evaluations (plain runs for
+the cost, runs accumulating the normal equations) and the validation runs of
+early stopping. The table gives the slope of log time and log memory against
+log N over the one-record cases.
+
+Run: ``python benchmarks/bench_scale.py`` (about half an hour on 2 cores);
+``--large`` adds N = 10^6 (long); ``--cases tdl:100000 issm:field`` runs
+only those; results are appended to ``results_scale.jsonl`` and the table in
+``results_scale.md`` is rebuilt from all results there (the latest of each
+case).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results_scale.jsonl"
+SIZES = (1_000, 10_000, 100_000)
+LARGE = 1_000_000
+FIELD = (11, 7200, 1.0 / 170.0)
+
+
+def _records(case: str):
+    """Inputs and outputs of a case: ``"<n>"`` (one record) or ``"field"``."""
+    from sysid_nn import HystereticOscillator
+
+    if case == "field":
+        n_rec, n, dt = FIELD
+        duration = n * dt
+        osc = HystereticOscillator(t1=0.1 * duration, t2=0.8 * duration)
+        rec = osc.generate(n_rec, n, dt=dt, random_state=0)
+        X = [f[:, None] for f in rec.excitation]
+        y = [
+            np.column_stack([d, v])
+            for d, v in zip(rec.displacement, rec.velocity, strict=True)
+        ]
+        return X, y
+    n, dt = int(case), 0.01
+    duration = n * dt
+    # Intensity rises over the first 5 % and is still at 3/4 of its peak at
+    # the end: a long, nearly stationary record.
+    osc = HystereticOscillator(t1=0.05 * duration, t2=2.0 * duration)
+    rec = osc.generate(1, n, dt=dt, random_state=0)
+    return rec.excitation[0][:, None], rec.displacement[0]
+
+
+def _rss() -> int:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def _instrument(est, log: list):
+    """Record per stage: iterations, time, and its split into evaluations."""
+    from sysid_nn import _base, _solvers
+
+    clock = {"resid": 0.0, "n_resid": 0, "normal": 0.0, "n_normal": 0}
+    clock.update(track=0.0, n_track=0)
+
+    def timed(name, fn):
+        def wrapper(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                clock[name] += time.perf_counter() - start
+                clock["n_" + name] += 1
+
+        return wrapper
+
+    _solvers._Objective.residuals = timed("resid", _solvers._Objective.residuals)
+    _solvers._Objective.normal_equations = timed(
+        "normal", _solvers._Objective.normal_equations
+    )
+    _base._Tracker.__call__ = timed("track", _base._Tracker.__call__)
+    restart = {"k": -1}
+    fit_one = est._fit_one_serial
+
+    def fit_one_logged(train, val, seed, k):
+        restart["k"] = k
+        return fit_one(train, val, seed, k)
+
+    est._fit_one_serial = fit_one_logged
+    for name, solve in list(_base._SOLVERS.items()):
+
+        def logged(objective, w, iters, tol, tracker, solve=solve):
+            before = dict(clock)
+            start = time.perf_counter()
+            out = solve(objective, w, iters, tol, tracker)
+            entry = {k: clock[k] - before[k] for k in clock}
+            entry.update(
+                restart=restart["k"],
+                seg=int(min(objective.seg, 10**9)),
+                budget=int(iters),
+                iters=int(out[1]),
+                seconds=time.perf_counter() - start,
+                early_stop=bool(tracker.stopped),
+            )
+            log.append(entry)
+            print(json.dumps({"stage": entry}), flush=True)
+            return out
+
+        _base._SOLVERS[name] = logged
+
+
+def _worker(kind: str, case: str) -> dict:
+    from sysid_nn import ISSMRegressor, TDLRegressor
+
+    cls = {"tdl": TDLRegressor, "issm": ISSMRegressor}[kind]
+    X, y = _records(case)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        # Compile (or load) the kernels outside the measurement.
+        Xw = [x[:300] for x in X] if isinstance(X, list) else X[:300]
+        yw = [v[:300] for v in y] if isinstance(y, list) else y[:300]
+        cls(n_init=1, max_iter=2, random_state=0).fit(Xw, yw)
+        log: list = []
+        est = cls(random_state=0)
+        _instrument(est, log)
+        after_fit = est._after_fit
+        phases = {}
+
+        def after_fit_timed(train, val):
+            start = time.perf_counter()
+            after_fit(train, val)
+            phases["after_fit"] = time.perf_counter() - start
+
+        est._after_fit = after_fit_timed
+        rss_before = _rss()
+        start = time.perf_counter()
+        est.fit(X, y)
+        seconds = time.perf_counter() - start
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    n = sum(len(x) for x in X) if isinstance(X, list) else len(X)
+    return {
+        "kind": kind,
+        "case": case,
+        "n_samples": n,
+        "n_weights": len(est.coefs_),
+        "seconds": seconds,
+        "restart_seconds": est.fit_time_,
+        "after_fit_seconds": phases.get("after_fit", 0.0),
+        "peak_rss_above_start": max(0, peak - rss_before),
+        "rss_before": rss_before,
+        "n_iter": int(est.n_iter_),
+        "stages": log,
+        "when": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "load_average": os.getloadavg()[0],
+    }
+
+
+def _run_case(kind: str, case: str) -> dict:
+    out = subprocess.run(
+        [sys.executable, __file__, "--worker", kind, case],
+        capture_output=True,
+        text=True,
+        env=dict(os.environ, PYTHONPATH=str(HERE.parent)),
+    )
+    if out.returncode != 0:
+        raise RuntimeError(out.stderr)
+    return json.loads(out.stdout.strip().splitlines()[-1])["result"]
+
+
+def _latest() -> dict:
+    latest = {}
+    if RESULTS.exists():
+        for line in RESULTS.read_text().splitlines():
+            r = json.loads(line)
+            latest[(r["kind"], r["case"])] = r
+    return latest
+
+
+def _slope(xs, ys) -> str:
+    if len(xs) < 2:
+        return "-"
+    return f"{np.polyfit(np.log(xs), np.log(ys), 1)[0]:.2f}"
+
+
+def _stage_summary(r: dict) -> list[str]:
+    """Per-stage totals over the restarts of one fit."""
+    by_seg: dict = {}
+    for st in r["stages"]:
+        e = by_seg.setdefault(st["seg"], dict(iters=0, seconds=0.0, n=0, budget=0))
+        for k in ("iters", "seconds", "resid", "n_resid", "normal", "n_normal"):
+            e[k] = e.get(k, 0) + st[k]
+        e["track"] = e.get("track", 0.0) + st["track"]
+        e["n"] += 1
+        e["budget"] = st["budget"]
+        e["stopped"] = e.get("stopped", 0) + int(st["early_stop"])
+    rows = []
+    for seg, e in sorted(by_seg.items()):
+        label = "free run" if seg >= 10**9 else ("one step" if seg == 1 else seg)
+        per_normal = e["normal"] / max(1, e["n_normal"])
+        per_resid = e["resid"] / max(1, e["n_resid"])
+        rows.append(
+            f"| {r['kind'].upper()} | {r['case']} | {label} | {e['budget']} | "
+            f"{e['iters']} / {e['n']} | {e['seconds']:.1f} | "
+            f"{e['seconds'] / max(1, e['iters']):.3f} | {per_normal * 1e3:.1f} | "
+            f"{per_resid * 1e3:.1f} | {e['track']:.1f} | {e['stopped']} |"
+        )
+    return rows
+
+
+def _write_table() -> str:
+    latest = _latest()
+    lines = [
+        "# Scale: fit time and memory against the record length",
+        "",
+        f"Machine: {platform.machine()}, {os.cpu_count()} cores shared with other "
+        f"work (load average at each fit in the last column), Python "
+        f"{platform.python_version()}. Defaults of each network, "
+        "`random_state=0`, one process per fit; restarts run one after another "
+        "(`n_jobs=None`). Peak memory: peak resident set above the level before "
+        "the fit (data and compiled kernels already loaded). Command: "
+        "`python benchmarks/bench_scale.py [--large]`.",
+        "",
+        "## One record",
+        "",
+        "| network | N | weights | fit (s) | peak memory above start (MB) | "
+        "iterations (chosen restart) | load |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for kind in ("tdl", "issm"):
+        rows = sorted(
+            (r for (k, c), r in latest.items() if k == kind and c != "field"),
+            key=lambda r: r["n_samples"],
+        )
+        for r in rows:
+            lines.append(
+                f"| {kind.upper()} | {r['n_samples']:,} | {r['n_weights']} | "
+                f"{r['seconds']:.1f} | {r['peak_rss_above_start'] / 2**20:.0f} | "
+                f"{r['n_iter']} | {r['load_average']:.1f} |"
+            )
+        ns = [r["n_samples"] for r in rows]
+        lines.append(
+            f"| {kind.upper()} slope (log-log) | | | "
+            f"{_slope(ns, [r['seconds'] for r in rows])} | "
+            f"{_slope(ns, [max(1, r['peak_rss_above_start']) for r in rows])} | | |"
+        )
+    lines += [
+        "",
+        "## Field shape: 11 records x 7200 samples, two outputs",
+        "",
+        "| network | fit (s) | restarts (s) | after the restarts (s) | "
+        "peak memory above start (MB) | load |",
+        "|---|---|---|---|---|---|",
+    ]
+    for kind in ("tdl", "issm"):
+        r = latest.get((kind, "field"))
+        if r:
+            lines.append(
+                f"| {kind.upper()} | {r['seconds']:.1f} | "
+                f"{r['restart_seconds']:.1f} | {r['after_fit_seconds']:.1f} | "
+                f"{r['peak_rss_above_start'] / 2**20:.0f} | "
+                f"{r['load_average']:.1f} |"
+            )
+    lines += [
+        "",
+        "## Where the time goes",
+        "",
+        "Per stage, summed over the restarts: the stage's iteration budget, the "
+        "iterations used / restarts, its time, the time per iteration, the mean "
+        "time of one normal-equations run (forward + sensitivities + `J'J`) and "
+        "of one plain run (the cost of a trial step), the time spent in the "
+        "validation runs of early stopping, and how many restarts early stopping "
+        "ended in that stage.",
+        "",
+        "| network | case | stage | budget | iterations / restarts | time (s) | "
+        "s / iteration | normal eq. run (ms) | plain run (ms) | validation (s) | "
+        "early stops |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for key in sorted(latest, key=lambda k: (k[0], k[1] == "field", k[1])):
+        r = latest[key]
+        lines += _stage_summary(r)
+    text = "\n".join(lines) + "\n"
+    (HERE / "results_scale.md").write_text(text)
+    return text
+
+
+def main(argv: list[str] | None = None) -> str:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--large", action="store_true", help="add N = 10^6")
+    parser.add_argument("--cases", nargs="*", help="e.g. tdl:100000 issm:field")
+    parser.add_argument("--table", action="store_true", help="only rebuild table")
+    parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.worker:
+        result = _worker(*args.worker)
+        with RESULTS.open("a") as f:
+            f.write(json.dumps(result) + "\n")
+        print(json.dumps({"result": result}))
+        return ""
+    if not args.table:
+        if args.cases:
+            cases = [tuple(c.split(":")) for c in args.cases]
+        else:
+            sizes = [*SIZES, LARGE] if args.large else list(SIZES)
+            cases = [(k, str(n)) for n in sizes for k in ("tdl", "issm")]
+            cases += [("tdl", "field"), ("issm", "field")]
+        for kind, case in cases:
+            r = _run_case(kind, case)
+            print(
+                f"{kind} {case}: {r['seconds']:.1f} s, "
+                f"{r['peak_rss_above_start'] / 2**20:.0f} MB",
+                flush=True,
+            )
+    text = _write_table()
+    print(text)
+    return text
+
+
+if __name__ == "__main__":
+    main()
