@@ -78,6 +78,25 @@ def _rss() -> int:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
+def _reset_peak() -> bool:
+    """Reset the peak resident set (Linux >= 4.0); False where not allowed."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        return False
+    return True
+
+
+def _peak() -> int:
+    """Peak resident set since the last reset (or since the start)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
 def _instrument(est, log: list):
     """Record per stage: iterations, time, and its split into evaluations."""
     from sysid_nn import _base, _solvers
@@ -131,7 +150,7 @@ def _instrument(est, log: list):
         _base._SOLVERS[name] = logged
 
 
-def _worker(kind: str, case: str) -> dict:
+def _worker(kind: str, case: str, params: dict) -> dict:
     from sysid_nn import ISSMRegressor, TDLRegressor
 
     cls = {"tdl": TDLRegressor, "issm": ISSMRegressor}[kind]
@@ -143,7 +162,7 @@ def _worker(kind: str, case: str) -> dict:
         yw = [v[:300] for v in y] if isinstance(y, list) else y[:300]
         cls(n_init=1, max_iter=2, random_state=0).fit(Xw, yw)
         log: list = []
-        est = cls(random_state=0)
+        est = cls(random_state=0, **params)
         _instrument(est, log)
         after_fit = est._after_fit
         phases = {}
@@ -154,18 +173,23 @@ def _worker(kind: str, case: str) -> dict:
             phases["after_fit"] = time.perf_counter() - start
 
         est._after_fit = after_fit_timed
+        reset = _reset_peak()
         rss_before = _rss()
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         est.fit(X, y)
         seconds = time.perf_counter() - start
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        cpu = time.process_time() - cpu
+    peak = _peak()
     n = sum(len(x) for x in X) if isinstance(X, list) else len(X)
     return {
         "kind": kind,
         "case": case,
+        "params": params,
+        "peak_since_fit_start": reset,
         "n_samples": n,
         "n_weights": len(est.coefs_),
         "seconds": seconds,
+        "cpu_seconds": cpu,
         "restart_seconds": est.fit_time_,
         "after_fit_seconds": phases.get("after_fit", 0.0),
         "peak_rss_above_start": max(0, peak - rss_before),
@@ -179,7 +203,7 @@ def _worker(kind: str, case: str) -> dict:
 
 def _run_case(kind: str, case: str) -> dict:
     out = subprocess.run(
-        [sys.executable, __file__, "--worker", kind, case],
+        [sys.executable, __file__, "--worker", kind, case, "{}"],
         capture_output=True,
         text=True,
         env=dict(os.environ, PYTHONPATH=str(HERE.parent)),
@@ -194,7 +218,7 @@ def _latest() -> dict:
     if RESULTS.exists():
         for line in RESULTS.read_text().splitlines():
             r = json.loads(line)
-            latest[(r["kind"], r["case"])] = r
+            latest[(r["kind"], r["case"], json.dumps(r.get("params", {})))] = r
     return latest
 
 
@@ -229,8 +253,18 @@ def _stage_summary(r: dict) -> list[str]:
     return rows
 
 
+def _run_costs(r: dict) -> tuple[float, float]:
+    """Mean seconds of one normal-equations run and of one plain run."""
+    st = r["stages"]
+    normal = sum(x["normal"] for x in st) / max(1, sum(x["n_normal"] for x in st))
+    plain = sum(x["resid"] for x in st) / max(1, sum(x["n_resid"] for x in st))
+    return normal, plain
+
+
 def _write_table() -> str:
-    latest = _latest()
+    every = _latest()
+    latest = {(k, c): r for (k, c, p), r in every.items() if p == "{}"}
+    capped = [r for (k, c, p), r in sorted(every.items()) if p != "{}"]
     lines = [
         "# Scale: fit time and memory against the record length",
         "",
@@ -267,6 +301,53 @@ def _write_table() -> str:
         )
     lines += [
         "",
+        "## Cost of one solver evaluation against N",
+        "",
+        "Mean over the whole fit of one normal-equations run (forward, "
+        "sensitivities and `J'J`, `J'r`) and of one plain run (a trial step's "
+        "cost), in microseconds per sample, and the slope of log time against "
+        "log N; rows with a capped budget (N = 10^6) are included.",
+        "",
+        "| network | N | budget | normal eq. run (us / sample) | plain run "
+        "(us / sample) |",
+        "|---|---|---|---|---|",
+    ]
+    for kind in ("tdl", "issm"):
+        rows = [r for (k, c), r in latest.items() if k == kind and c != "field"]
+        rows += [r for r in capped if r["kind"] == kind and r["case"] != "field"]
+        rows.sort(key=lambda r: r["n_samples"])
+        costs = [_run_costs(r) for r in rows]
+        for r, (normal, plain) in zip(rows, costs, strict=True):
+            budget = json.dumps(r.get("params")) if r.get("params") else "default"
+            lines.append(
+                f"| {kind.upper()} | {r['n_samples']:,} | {budget} | "
+                f"{normal / r['n_samples'] * 1e6:.2f} | "
+                f"{plain / r['n_samples'] * 1e6:.2f} |"
+            )
+        ns = [r["n_samples"] for r in rows]
+        lines.append(
+            f"| {kind.upper()} slope (log-log) | | | "
+            f"{_slope(ns, [c[0] for c in costs])} | "
+            f"{_slope(ns, [c[1] for c in costs])} |"
+        )
+    if capped:
+        lines += [
+            "",
+            "## Capped budgets",
+            "",
+            "| network | N | parameters | fit (s) | peak memory above start (MB) "
+            "| iterations | load |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for r in capped:
+            lines.append(
+                f"| {r['kind'].upper()} | {r['n_samples']:,} | "
+                f"`{json.dumps(r['params'])}` | {r['seconds']:.1f} | "
+                f"{r['peak_rss_above_start'] / 2**20:.0f} | {r['n_iter']} | "
+                f"{r['load_average']:.1f} |"
+            )
+    lines += [
+        "",
         "## Field shape: 11 records x 7200 samples, two outputs",
         "",
         "| network | fit (s) | restarts (s) | after the restarts (s) | "
@@ -298,8 +379,12 @@ def _write_table() -> str:
         "early stops |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for key in sorted(latest, key=lambda k: (k[0], k[1] == "field", k[1])):
-        r = latest[key]
+    for key in sorted(
+        latest,
+        key=lambda k: (k[0], k[1] == "field", int(k[1]) if k[1].isdigit() else 0),
+    ):
+        lines += _stage_summary(latest[key])
+    for r in capped:
         lines += _stage_summary(r)
     text = "\n".join(lines) + "\n"
     (HERE / "results_scale.md").write_text(text)
@@ -311,10 +396,11 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--large", action="store_true", help="add N = 10^6")
     parser.add_argument("--cases", nargs="*", help="e.g. tdl:100000 issm:field")
     parser.add_argument("--table", action="store_true", help="only rebuild table")
-    parser.add_argument("--worker", nargs=2, help=argparse.SUPPRESS)
+    parser.add_argument("--worker", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
-        result = _worker(*args.worker)
+        kind, case, params = args.worker
+        result = _worker(kind, case, json.loads(params))
         with RESULTS.open("a") as f:
             f.write(json.dumps(result) + "\n")
         print(json.dumps({"result": result}))

@@ -25,18 +25,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from sysid_nn._kernels import _recurrence as rec
 from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp, out_of_range
-from sysid_nn._kernels._recurrence import (
-    FULL_JAC,
-    NO_JAC,
-    NORMAL,
-    add_row,
-    copy_rows,
-    fill_rows,
-    finish,
-    keep_step,
-    new_block,
-)
 
 
 @njit(cache=True, inline="always")
@@ -64,9 +54,9 @@ def issm_run(
     d w = H Psi`` by the forward sensitivities of eq. 10; with ``NORMAL``,
     ``JtJ`` and ``Jtr`` receive the sums of ``J' J`` and ``J' (yhat - y)``
     (``syrk`` is :data:`._recurrence.SYRK`) and ``J`` is not used (only
-    ``Psi(t-1)`` is kept). With ``want_lin``,
-    ``D[t]`` (``(n, n_z)``) receives ``d x(t) / d z``, whose blocks are
-    ``Phi(t)`` and ``K(t)`` of eq. 12. ``Z`` and ``A`` keep the network
+    ``Psi(t-1)`` is kept). With ``want_lin``, ``D[t]`` (``(n, n_z)``)
+    receives ``d x(t) / d z``, whose blocks are ``Phi(t)`` and ``K(t)`` of
+    eq. 12. ``Z`` and ``A`` keep the network
     inputs and hidden activations for the adjoint pass when they have rows.
     ``diverged[s]`` is the first modelled index of sequence ``s`` whose state
     left ``[-bound, bound]``, or -1.
@@ -78,7 +68,7 @@ def issm_run(
     n_w = w.shape[0]
     width = np.max(sizes)
     predictor = seg_len == 1
-    want_jac = jac != NO_JAC
+    want_jac = jac != rec.NO_JAC
     sens = want_jac or want_lin
     x = np.empty(n)
     e = np.zeros(p)
@@ -93,14 +83,14 @@ def issm_run(
     lam = np.empty(n_w)  # d x_j / d w at this step before the recursion
     psi = np.zeros((n, n_w if want_jac else 0))
     psi_prev = np.zeros((n, n_w if want_jac else 0))
-    Jb, rb = new_block(n_w, jac)
+    Jb, rb = rec.new_block(n_w, jac)
     n_b = 0
     row_base = 0
     for s in range(starts.shape[0] - 1):
         a = starts[s]
         b = starts[s + 1]
         diverged[s] = -1
-        fill_rows(Xs, a, a + h, X0[s])
+        rec.fill_rows(Xs, a, a + h, X0[s])
         for i in range(n):
             x[i] = X0[s, i]
         if want_jac:
@@ -120,10 +110,10 @@ def issm_run(
                     e[k] = Y[t - 1, k] - x[k]
             _network_input(x, U, t, nk, e, z)
             mlp_forward(w, sizes, act, bypass, z, acts, out)
-            keep_step(Z, A, t, z, acts)
+            rec.keep_step(Z, A, t, z, acts)
             if out_of_range(out, bound):
                 diverged[s] = k_local
-                fill_rows(Xs, t, b, np.full(n, np.nan))
+                rec.fill_rows(Xs, t, b, np.full(n, np.nan))
                 break
             for i in range(n):
                 x[i] = out[i]
@@ -153,15 +143,17 @@ def issm_run(
                             lam[c] += c_i * psi_prev[i, c]
                 for c in range(n_w):
                     psi[j, c] = lam[c]
-            if jac == FULL_JAC:
-                copy_rows(J[row_base + k_local * p :], psi, 0, p)
-            elif jac == NORMAL:
+            if jac == rec.FULL_JAC:
+                rec.copy_rows(J[row_base + k_local * p :], psi, 0, p)
+            elif jac == rec.NORMAL:
                 for k in range(p):
-                    n_b = add_row(psi[k], out[k] - Y[t, k], Jb, rb, n_b, JtJ, Jtr, syrk)
+                    n_b = rec.add_row(
+                        psi[k], out[k] - Y[t, k], Jb, rb, n_b, JtJ, Jtr, syrk
+                    )
             if want_jac:
                 psi, psi_prev = psi_prev, psi
         row_base += (b - a - h) * p
-    finish(Jb, rb, n_b, JtJ, Jtr, syrk)
+    rec.finish(Jb, rb, n_b, JtJ, Jtr, syrk)
 
 
 @njit(cache=True)
