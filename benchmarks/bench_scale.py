@@ -201,6 +201,44 @@ def _worker(kind: str, case: str, params: dict) -> dict:
     }
 
 
+def _costs(sizes) -> dict:
+    """Thread CPU time of one solver evaluation against N, in this process.
+
+    Best of three of a normal-equations run and of a plain run (one-step and
+    100-sample shooting objectives: a free run of briefly trained weights may
+    stop early at a divergence) with the default networks fitted briefly to
+    the record's start: the per-iteration cost, free of the machine's load.
+    """
+    from sysid_nn import ISSMRegressor, TDLRegressor
+    from sysid_nn._solvers import _Objective
+
+    out = {"kind": "costs", "case": "costs", "rows": []}
+    X, y = _records(str(max(sizes)))
+    for name, cls in (("tdl", TDLRegressor), ("issm", ISSMRegressor)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            est = cls(n_init=1, max_iter=1, random_state=0).fit(X[:2000], y[:2000])
+        for n in sizes:
+            data = est._stack([X[:n]], [y[:n, None]])
+            n_res = len(data.modelled) * est.n_outputs_
+            for seg in (1, 100):
+                obj = _Objective(est, data, seg, est._penalty_mask(), n_res)
+                best = {"normal": np.inf, "plain": np.inf}
+                for _ in range(3):
+                    for what, fn in (
+                        ("normal", obj.normal_equations),
+                        ("plain", obj.residuals),
+                    ):
+                        obj._cache_w = None
+                        start = time.thread_time()
+                        fn(est.coefs_)
+                        best[what] = min(best[what], time.thread_time() - start)
+                assert np.all(np.isfinite(obj.residuals(est.coefs_)))
+                out["rows"].append({"kind": name, "n": n, "seg": seg, **best})
+                print(json.dumps(out["rows"][-1]), flush=True)
+    return out
+
+
 def _run_case(kind: str, case: str) -> dict:
     out = subprocess.run(
         [sys.executable, __file__, "--worker", kind, case, "{}"],
@@ -222,10 +260,20 @@ def _latest() -> dict:
     return latest
 
 
+def _mb(nbytes: int) -> str:
+    return f"{nbytes / 2**20:.0f}" if nbytes >= 2**20 else "< 1"
+
+
 def _slope(xs, ys) -> str:
     if len(xs) < 2:
         return "-"
     return f"{np.polyfit(np.log(xs), np.log(ys), 1)[0]:.2f}"
+
+
+def _above_mb(rows) -> tuple[list, list]:
+    """N and peak memory of the fits whose peak is at least 1 MB."""
+    big = [r for r in rows if r["peak_rss_above_start"] >= 2**20]
+    return [r["n_samples"] for r in big], [r["peak_rss_above_start"] for r in big]
 
 
 def _stage_summary(r: dict) -> list[str]:
@@ -261,8 +309,44 @@ def _run_costs(r: dict) -> tuple[float, float]:
     return normal, plain
 
 
+def _cost_lines(r: dict) -> list[str]:
+    lines = [
+        "",
+        "## CPU time of one solver evaluation against N",
+        "",
+        "Thread CPU time (best of three, free of the machine's load) of one "
+        "normal-equations run (forward, sensitivities, `J'J` and `J'r`: once "
+        "per accepted Levenberg-Marquardt step) and of one plain run (the cost "
+        "of a trial step), default networks, one record; `python "
+        "benchmarks/bench_scale.py --costs`.",
+        "",
+        "| network | stage | N | normal equations (s) | (us / sample) | plain "
+        "run (s) | (us / sample) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    groups: dict = {}
+    for row in r["rows"]:
+        groups.setdefault((row["kind"], row["seg"]), []).append(row)
+    for (kind, seg), rows in groups.items():
+        stage = "one step" if seg == 1 else f"shooting, {seg} samples"
+        for row in rows:
+            lines.append(
+                f"| {kind.upper()} | {stage} | {row['n']:,} | {row['normal']:.4f} | "
+                f"{row['normal'] / row['n'] * 1e6:.2f} | {row['plain']:.4f} | "
+                f"{row['plain'] / row['n'] * 1e6:.2f} |"
+            )
+        ns = [row["n"] for row in rows]
+        lines.append(
+            f"| {kind.upper()} | {stage} | slope (log-log) | "
+            f"{_slope(ns, [row['normal'] for row in rows])} | | "
+            f"{_slope(ns, [row['plain'] for row in rows])} | |"
+        )
+    return lines
+
+
 def _write_table() -> str:
     every = _latest()
+    costs = every.pop(("costs", "costs", "{}"), None)
     latest = {(k, c): r for (k, c, p), r in every.items() if p == "{}"}
     capped = [r for (k, c, p), r in sorted(every.items()) if p != "{}"]
     lines = [
@@ -290,19 +374,22 @@ def _write_table() -> str:
         for r in rows:
             lines.append(
                 f"| {kind.upper()} | {r['n_samples']:,} | {r['n_weights']} | "
-                f"{r['seconds']:.1f} | {r['peak_rss_above_start'] / 2**20:.0f} | "
+                f"{r['seconds']:.1f} | {_mb(r['peak_rss_above_start'])} | "
                 f"{r['n_iter']} | {r['load_average']:.1f} |"
             )
         ns = [r["n_samples"] for r in rows]
         lines.append(
             f"| {kind.upper()} slope (log-log) | | | "
             f"{_slope(ns, [r['seconds'] for r in rows])} | "
-            f"{_slope(ns, [max(1, r['peak_rss_above_start']) for r in rows])} | | |"
+            f"{_slope(*_above_mb(rows))} | | |"
         )
+    if costs:
+        lines += _cost_lines(costs)
     lines += [
         "",
-        "## Cost of one solver evaluation against N",
+        "## Cost of one solver evaluation against N, within the fits",
         "",
+        "Wall time, so under the machine's load. "
         "Mean over the whole fit of one normal-equations run (forward, "
         "sensitivities and `J'J`, `J'r`) and of one plain run (a trial step's "
         "cost), in microseconds per sample, and the slope of log time against "
@@ -343,8 +430,14 @@ def _write_table() -> str:
             lines.append(
                 f"| {r['kind'].upper()} | {r['n_samples']:,} | "
                 f"`{json.dumps(r['params'])}` | {r['seconds']:.1f} | "
-                f"{r['peak_rss_above_start'] / 2**20:.0f} | {r['n_iter']} | "
+                f"{_mb(r['peak_rss_above_start'])} | {r['n_iter']} | "
                 f"{r['load_average']:.1f} |"
+            )
+        for kind in ("tdl", "issm"):
+            rows = [r for r in capped if r["kind"] == kind and r["case"] != "field"]
+            lines.append(
+                f"| {kind.upper()} memory slope (log-log) | | | | "
+                f"{_slope(*_above_mb(rows))} | | |"
             )
     lines += [
         "",
@@ -360,8 +453,7 @@ def _write_table() -> str:
             lines.append(
                 f"| {kind.upper()} | {r['seconds']:.1f} | "
                 f"{r['restart_seconds']:.1f} | {r['after_fit_seconds']:.1f} | "
-                f"{r['peak_rss_above_start'] / 2**20:.0f} | "
-                f"{r['load_average']:.1f} |"
+                f"{_mb(r['peak_rss_above_start'])} | {r['load_average']:.1f} |"
             )
     lines += [
         "",
@@ -396,6 +488,9 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument("--large", action="store_true", help="add N = 10^6")
     parser.add_argument("--cases", nargs="*", help="e.g. tdl:100000 issm:field")
     parser.add_argument("--table", action="store_true", help="only rebuild table")
+    parser.add_argument(
+        "--costs", action="store_true", help="CPU time of one evaluation against N"
+    )
     parser.add_argument("--worker", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.worker:
@@ -405,7 +500,11 @@ def main(argv: list[str] | None = None) -> str:
             f.write(json.dumps(result) + "\n")
         print(json.dumps({"result": result}))
         return ""
-    if not args.table:
+    if args.costs:
+        result = _costs([*SIZES, LARGE])
+        with RESULTS.open("a") as f:
+            f.write(json.dumps(result) + "\n")
+    elif not args.table:
         if args.cases:
             cases = [tuple(c.split(":")) for c in args.cases]
         else:

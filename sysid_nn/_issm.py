@@ -805,9 +805,8 @@ default=None
     ):
         n_rows, n, p = data.Y.shape[0], self.n_states_, self.n_outputs_
         n_z = int(self._sizes_[0])
-        mode, J, JtJ, Jtr = jacobian_buffers(
-            want_jac, len(data.modelled) * p, 0, len(w)
-        )
+        n_mod = n_rows - data.h * (len(data.starts) - 1)  # modelled rows
+        mode, J, JtJ, Jtr = jacobian_buffers(want_jac, n_mod * p, 0, len(w))
         Xs = np.empty((n_rows, n))
         kept = n_rows if keep_state else 0
         Z = np.empty((kept, n_z))

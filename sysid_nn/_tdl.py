@@ -351,8 +351,9 @@ such, default=None
 
     def _run(self, w, data, seg_len, want_jac, keep_state=True):
         n_rows, n_out = data.Y.shape[0], self.n_outputs_
+        n_mod = n_rows - data.h * (len(data.starts) - 1)  # modelled rows
         mode, J, JtJ, Jtr = jacobian_buffers(
-            want_jac, len(data.modelled) * n_out, (self.output_lags + 1) * n_out, len(w)
+            want_jac, n_mod * n_out, (self.output_lags + 1) * n_out, len(w)
         )
         Yhat = np.empty_like(data.Y)
         kept = n_rows if keep_state else 0
