@@ -25,7 +25,6 @@ from itertools import pairwise
 import numpy as np
 import threadpoolctl
 from joblib import Parallel, delayed
-from scipy.optimize import minimize
 from sklearn.base import BaseEstimator
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_array, check_random_state
@@ -36,6 +35,8 @@ from sysid_nn import _uncertainty
 from sysid_nn._progress import report_stage
 from sysid_nn._state_estimation import fit_initial_condition, noise_variance
 from sysid_nn._validation import check_same_width
+
+from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 
 __all__ = ["DivergenceWarning"]
 
@@ -156,10 +157,6 @@ class DivergenceWarning(UserWarning):
     >>> issubclass(DivergenceWarning, UserWarning)
     True
     """
-
-
-class _EarlyStop(Exception):
-    """Raised inside a solver callback to end a stage early."""
 
 
 @dataclass
@@ -302,8 +299,16 @@ class _RecurrentRegressorBase(BaseEstimator):
     ) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
 
-    def _run(self, w, data: _Data, seg_len: int, want_jac: bool):  # pragma: no cover
-        """Return ``(Yhat, J or None, diverged, state_for_gradient)``."""
+    def _run(
+        self, w, data: _Data, seg_len: int, want_jac, keep_state: bool = True
+    ):  # pragma: no cover
+        """Return ``(Yhat, jac, diverged, state_for_gradient)``.
+
+        ``jac`` is None for ``want_jac=False``, the full Jacobian of the
+        modelled outputs for ``True`` and the normal equations ``(J'J, J'(Yhat
+        - Y))`` for ``"normal"``. Without ``keep_state`` the state holds no
+        per-row arrays and cannot serve :meth:`_gradient`.
+        """
         raise NotImplementedError
 
     def _gradient(
@@ -1087,70 +1092,6 @@ class _Run:
     converged: bool
 
 
-class _Objective:
-    """Least-squares objective of one training stage (standardised units).
-
-    ``0.5 * mean(r**2) + 0.5 * alpha / n_res * ||w_masked||**2``, where ``r``
-    are the errors of the recurrence restarted every ``seg`` samples.
-    """
-
-    def __init__(self, est, data: _Data, seg: int, mask: np.ndarray, n_res: int):
-        self.est, self.data, self.seg, self.mask = est, data, seg, mask
-        self.rows = data.modelled
-        self.root_n = np.sqrt(n_res)
-        self.root_alpha = np.sqrt(est.alpha)
-        self._cache_w = None
-
-    def _forward(self, w, want_jac):
-        if (
-            self._cache_w is not None
-            and np.array_equal(w, self._cache_w)
-            and (self._cache[1] is not None or not want_jac)
-        ):
-            return self._cache
-        result = self.est._run(w, self.data, self.seg, want_jac)
-        self._cache_w, self._cache = w.copy(), result
-        return result
-
-    def residuals(self, w):
-        Yhat, _, diverged, _ = self._forward(w, False)
-        r = (Yhat[self.rows] - self.data.Y[self.rows]).ravel() / self.root_n
-        if (diverged >= 0).any():
-            r = np.full_like(r, np.inf)
-        if self.root_alpha > 0:
-            r = np.concatenate([r, self.root_alpha / self.root_n * w[self.mask]])
-        return r
-
-    def jacobian(self, w):
-        _, J, _, _ = self._forward(w, True)
-        J = J / self.root_n
-        if self.root_alpha > 0:
-            P = np.zeros((int(self.mask.sum()), len(w)))
-            P[np.arange(P.shape[0]), np.flatnonzero(self.mask)] = (
-                self.root_alpha / self.root_n
-            )
-            J = np.vstack([J, P])
-        return J
-
-    def loss(self, w):
-        r = self.residuals(w)
-        return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf
-
-    def loss_and_grad(self, w):
-        Yhat, _, diverged, state = self._forward(w, False)
-        if (diverged >= 0).any():
-            return np.inf, np.zeros_like(w)
-        r = (Yhat[self.rows] - self.data.Y[self.rows]).ravel()
-        n = self.root_n**2
-        grad = self.est._gradient(w, self.data, self.seg, state) / n
-        loss = 0.5 * float(r @ r) / n
-        if self.root_alpha > 0:
-            wm = np.where(self.mask, w, 0.0)
-            loss += 0.5 * self.est.alpha / n * float(wm @ wm)
-            grad += self.est.alpha / n * wm
-        return loss, grad
-
-
 class _Tracker:
     """Keeps the weights with the best validation loss seen after each step."""
 
@@ -1179,105 +1120,3 @@ class _Tracker:
             if self.patience is not None and self.since_best >= self.patience:
                 self.stopped = True
                 raise _EarlyStop
-
-
-def _solve_lm(objective: _Objective, w, iters, tol, tracker):
-    """Levenberg-Marquardt with the exact recurrent Jacobian.
-
-    Marquardt's scale-invariant damping ``mu * diag(J'J)`` and Nielsen's
-    update of ``mu``. The normal equations are solved directly: the problems
-    here have many residuals and few weights, where ``J'J`` costs a fraction
-    of the SVD a general trust-region solver takes. A step whose run diverges
-    has infinite cost and is rejected like any other bad step. The tracker
-    sees the weights after every accepted step. Returns ``(w, n_evaluations,
-    converged)``.
-    """
-    r = objective.residuals(w)
-    cost = 0.5 * float(r @ r)
-    J = objective.jacobian(w)
-    A, g = J.T @ J, J.T @ r
-    mu, nu = 1e-3, 2.0
-    tracker.stopped = False
-    n_eval = 0
-    try:
-        while n_eval < iters:
-            if np.max(np.abs(g)) <= tol * max(1.0, cost):
-                return w, n_eval, True
-            d = np.maximum(np.diag(A), 1e-12 * max(1.0, np.max(np.diag(A))))
-            try:
-                step = -np.linalg.solve(A + mu * np.diag(d), g)
-            except np.linalg.LinAlgError:
-                mu, nu = mu * nu, nu * 2.0
-                n_eval += 1
-                continue
-            if np.linalg.norm(step) <= tol * (np.linalg.norm(w) + tol):
-                return w, n_eval, True
-            w_new = w + step
-            r_new = objective.residuals(w_new)
-            n_eval += 1
-            cost_new = (
-                0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
-            )
-            predicted = 0.5 * float(step @ (mu * d * step - g))
-            rho = (cost - cost_new) / predicted if predicted > 0 else -1.0
-            if rho > 0:
-                small = cost - cost_new <= tol * cost
-                w, r, cost = w_new, r_new, cost_new
-                J = objective.jacobian(w)
-                A, g = J.T @ J, J.T @ r
-                tracker(w)
-                mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
-                nu = 2.0
-                if small:
-                    return w, n_eval, True
-            else:
-                mu, nu = mu * nu, nu * 2.0
-    except _EarlyStop:
-        return w, n_eval, True
-    return w, n_eval, False
-
-
-def _solve_minimize(method):
-    def solve(objective: _Objective, w, iters, tol, tracker):
-        count = {"n": 0, "x": w}
-
-        def callback(xk):
-            count["n"] += 1
-            count["x"] = np.array(xk, copy=True)
-            tracker(xk)
-
-        tracker.stopped = False
-        options = {"maxiter": iters}
-        if method == "L-BFGS-B":
-            options["gtol"] = tol
-        # Scale the stage's loss to 1 at its start so that ``tol`` is relative:
-        # started at the ARX fit, the loss can be 1e-10 in standardised units.
-        scale = objective.loss(w)
-        scale = scale if np.isfinite(scale) and scale > 0 else 1.0
-
-        def scaled(x):
-            loss, grad = objective.loss_and_grad(x)
-            return loss / scale, grad / scale
-
-        try:
-            res = minimize(
-                scaled,
-                w,
-                jac=True,
-                method=method,
-                tol=tol,
-                callback=callback,
-                options=options,
-            )
-        except _EarlyStop:
-            return count["x"], count["n"], True
-        return res.x, int(res.nit), bool(res.success)
-
-    return solve
-
-
-_SOLVERS = {
-    "lm": _solve_lm,
-    "lbfgs": _solve_minimize("L-BFGS-B"),
-    "slsqp": _solve_minimize("SLSQP"),
-}

@@ -17,12 +17,12 @@ from sysid_nn._base import (
     _FREE_RUN,
     _Data,
     _document_training_parameters,
-    _Objective,
     _RecurrentRegressorBase,
-    _solve_lm,
 )
 from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_run
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
+from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
+from sysid_nn._solvers import _Objective, _solve_lm
 from sysid_nn._tdl import TDLRegressor
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]
@@ -79,8 +79,10 @@ class _Restricted:
     def residuals(self, v):
         return self.objective.residuals(self._full(v))
 
-    def jacobian(self, v):
-        return self.objective.jacobian(self._full(v))[:, self.idx]
+    def normal_equations(self, v):
+        # Those of the subset are the rows and columns of the whole problem's.
+        JtJ, Jtr = self.objective.normal_equations(self._full(v))
+        return JtJ[np.ix_(self.idx, self.idx)], Jtr[self.idx]
 
     def loss(self, v):
         return self.objective.loss(self._full(v))
@@ -881,25 +883,31 @@ default=None
         return mask
 
     # ------------------------------------------------------------ kernels
-    def _run(self, w, data, seg_len, want_jac):
-        return self._run_from(w, data, seg_len, want_jac, self._initial_states(data))
+    def _run(self, w, data, seg_len, want_jac, keep_state=True):
+        X0 = self._initial_states(data)
+        return self._run_from(w, data, seg_len, want_jac, X0, keep_state=keep_state)
 
-    def _run_from(self, w, data, seg_len, want_jac, X0, want_lin=False):
+    def _run_from(
+        self, w, data, seg_len, want_jac, X0, want_lin=False, keep_state=True
+    ):
         n_rows, n, p = data.Y.shape[0], self.n_states_, self.n_outputs_
         n_z = int(self._sizes_[0])
+        n_mod = n_rows - data.h * (len(data.starts) - 1)  # modelled rows
+        mode, J, JtJ, Jtr = jacobian_buffers(want_jac, n_mod * p, 0, len(w))
         Xs = np.empty((n_rows, n))
-        J = np.empty((len(data.modelled) * p if want_jac else 0, len(w)))
-        Z = np.empty((n_rows, n_z))
-        A = np.empty((n_rows, max(1, n_hidden(self._sizes_))))
+        kept = n_rows if keep_state else 0
+        Z = np.empty((kept, n_z))
+        A = np.empty((kept, max(1, n_hidden(self._sizes_))))
         D = np.empty((n_rows if want_lin else 0, n, n_z))
         diverged = np.empty(len(data.starts) - 1, dtype=np.int64)
         issm_run(
             w, self._sizes_, self._act, self._bypass(), data.Y, data.U, data.starts,
             data.h, self.input_delay, X0, min(seg_len, _FREE_RUN), self._bound,
-            want_jac, want_lin, Xs, J, Z, A, D, diverged,
+            mode, want_lin, Xs, J, Z, A, D, JtJ, Jtr, SYRK, diverged,
         )  # fmt: skip
         Yhat = np.ascontiguousarray(Xs[:, :p])
-        return Yhat, (J if want_jac else None), diverged, (Xs, Z, A, D)
+        jac = jacobian_result(mode, J, JtJ, Jtr)
+        return Yhat, jac, diverged, (Xs, Z, A, D)
 
     def _gradient(self, w, data, seg_len, state):
         Xs, Z, A, _ = state
@@ -912,7 +920,7 @@ default=None
 
     def _run_horizon(self, w, data, horizon):
         X0 = self._initial_states(data)
-        _, _, _, (Xp, _, _, _) = self._run_from(w, data, 1, False, X0)
+        _, _, _, (Xp, _, _, _) = self._run_from(w, data, 1, False, X0, keep_state=False)
         Yhat = np.empty_like(data.Y)
         issm_predict_horizon(
             w, self._sizes_, self._act, self._bypass(), data.U, data.starts, data.h,

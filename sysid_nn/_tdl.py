@@ -16,6 +16,7 @@ from sysid_nn._base import (
     _RecurrentRegressorBase,
 )
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
+from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
 
 __all__ = ["TDLRegressor"]
@@ -418,19 +419,22 @@ such, default=None
     def _lags(self) -> tuple[int, int, int]:
         return self.output_lags, self.input_lags, self.input_delay
 
-    def _run(self, w, data, seg_len, want_jac):
-        n_rows = data.Y.shape[0]
-        n_mod = len(data.modelled) * self.n_outputs_
+    def _run(self, w, data, seg_len, want_jac, keep_state=True):
+        n_rows, n_out = data.Y.shape[0], self.n_outputs_
+        n_mod = n_rows - data.h * (len(data.starts) - 1)  # modelled rows
+        mode, J, JtJ, Jtr = jacobian_buffers(
+            want_jac, n_mod * n_out, (self.output_lags + 1) * n_out, len(w)
+        )
         Yhat = np.empty_like(data.Y)
-        J = np.empty((n_mod if want_jac else 0, len(w)))
-        Z = np.empty((n_rows, self._S.shape[0]))
-        A = np.empty((n_rows, max(1, n_hidden(self._sizes_))))
+        kept = n_rows if keep_state else 0
+        Z = np.empty((kept, self._S.shape[0]))
+        A = np.empty((kept, max(1, n_hidden(self._sizes_))))
         diverged = np.empty(len(data.starts) - 1, dtype=np.int64)
         net, lags = self._network(), self._lags()
         tdl_run(w, *net, data.Y, data.U, data.starts, data.h, *lags,
-                min(seg_len, _FREE_RUN), self._bound, want_jac,
-                Yhat, J, Z, A, diverged)  # fmt: skip
-        return Yhat, (J if want_jac else None), diverged, (Yhat, Z, A)
+                min(seg_len, _FREE_RUN), self._bound, mode,
+                Yhat, J, Z, A, JtJ, Jtr, SYRK, diverged)  # fmt: skip
+        return Yhat, jacobian_result(mode, J, JtJ, Jtr), diverged, (Yhat, Z, A)
 
     def _gradient(self, w, data, seg_len, state):
         Yhat, Z, A = state

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from sysid_nn._kernels import _recurrence as rec
 from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp, out_of_range
 
 
@@ -42,19 +43,23 @@ def _network_input(x, U, t, nk, e, z):
 
 @njit(cache=True)
 def issm_run(
-    w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound, want_jac,
-    want_lin, Xs, J, Z, A, D, diverged,
+    w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound, jac,
+    want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged,
 ):  # fmt: skip
     """Run the state recurrence; optionally the Jacobian and linearisation.
 
     ``Xs`` (``(n_rows, n)``) receives the states (history rows hold ``X0``;
-    NaN from a divergence on). With ``want_jac``, ``J`` (``(n_modelled * p,
-    n_w)``) receives ``d yhat / d w = H Psi`` by the forward sensitivities of
-    eq. 10. With ``want_lin``, ``D[t]`` (``(n, n_z)``) receives ``d x(t) /
-    d z``, whose blocks are ``Phi(t)`` and ``K(t)`` of eq. 12. ``Z`` and
-    ``A`` keep the network inputs and hidden activations for the adjoint
-    pass. ``diverged[s]`` is the first modelled index of sequence ``s`` whose
-    state left ``[-bound, bound]``, or -1.
+    NaN from a divergence on). ``jac`` is a mode of :mod:`._recurrence`:
+    with ``FULL_JAC``, ``J`` (``(n_modelled * p, n_w)``) receives ``d yhat /
+    d w = H Psi`` by the forward sensitivities of eq. 10; with ``NORMAL``,
+    ``JtJ`` and ``Jtr`` receive the sums of ``J' J`` and ``J' (yhat - y)``
+    (``syrk`` is :data:`._recurrence.SYRK`) and ``J`` is not used (only
+    ``Psi(t-1)`` is kept). With ``want_lin``, ``D[t]`` (``(n, n_z)``)
+    receives ``d x(t) / d z``, whose blocks are ``Phi(t)`` and ``K(t)`` of
+    eq. 12. ``Z`` and ``A`` keep the network
+    inputs and hidden activations for the adjoint pass when they have rows.
+    ``diverged[s]`` is the first modelled index of sequence ``s`` whose state
+    left ``[-bound, bound]``, or -1.
     """
     n = Xs.shape[1]
     p = Y.shape[1]
@@ -63,6 +68,7 @@ def issm_run(
     n_w = w.shape[0]
     width = np.max(sizes)
     predictor = seg_len == 1
+    want_jac = jac != rec.NO_JAC
     sens = want_jac or want_lin
     x = np.empty(n)
     e = np.zeros(p)
@@ -72,20 +78,19 @@ def issm_run(
     coef = np.empty(n)
     d1 = np.empty(width)
     d2 = np.empty(width)
-    n_a = A.shape[1]
     z = np.empty(n_z)
-    acts = np.zeros(n_a)
+    acts = np.zeros(max(1, A.shape[1]))
     lam = np.empty(n_w)  # d x_j / d w at this step before the recursion
     psi = np.zeros((n, n_w if want_jac else 0))
     psi_prev = np.zeros((n, n_w if want_jac else 0))
+    Jb, rb = rec.new_block(n_w, jac)
+    n_b = 0
     row_base = 0
     for s in range(starts.shape[0] - 1):
         a = starts[s]
         b = starts[s + 1]
         diverged[s] = -1
-        for t in range(a, a + h):
-            for i in range(n):
-                Xs[t, i] = X0[s, i]
+        rec.fill_rows(Xs, a, a + h, X0[s])
         for i in range(n):
             x[i] = X0[s, i]
         if want_jac:
@@ -105,17 +110,10 @@ def issm_run(
                     e[k] = Y[t - 1, k] - x[k]
             _network_input(x, U, t, nk, e, z)
             mlp_forward(w, sizes, act, bypass, z, acts, out)
-            # Kept per row for the adjoint pass; copied from contiguous
-            # scratch buffers rather than writing through per-row views.
-            for i in range(n_z):
-                Z[t, i] = z[i]
-            for i in range(n_a):
-                A[t, i] = acts[i]
+            rec.keep_step(Z, A, t, z, acts)
             if out_of_range(out, bound):
                 diverged[s] = k_local
-                for tt in range(t, b):
-                    for i in range(n):
-                        Xs[tt, i] = np.nan
+                rec.fill_rows(Xs, t, b, np.full(n, np.nan))
                 break
             for i in range(n):
                 x[i] = out[i]
@@ -145,13 +143,17 @@ def issm_run(
                             lam[c] += c_i * psi_prev[i, c]
                 for c in range(n_w):
                     psi[j, c] = lam[c]
-            if want_jac:
-                r0 = row_base + k_local * p
+            if jac == rec.FULL_JAC:
+                rec.copy_rows(J[row_base + k_local * p :], psi, 0, p)
+            elif jac == rec.NORMAL:
                 for k in range(p):
-                    for c in range(n_w):
-                        J[r0 + k, c] = psi[k, c]
+                    n_b = rec.add_row(
+                        psi[k], out[k] - Y[t, k], Jb, rb, n_b, JtJ, Jtr, syrk
+                    )
+            if want_jac:
                 psi, psi_prev = psi_prev, psi
         row_base += (b - a - h) * p
+    rec.finish(Jb, rb, n_b, JtJ, Jtr, syrk)
 
 
 @njit(cache=True)

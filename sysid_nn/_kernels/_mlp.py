@@ -37,11 +37,8 @@ def n_hidden(sizes: np.ndarray) -> int:
 @njit(cache=True, inline="always")
 def _activate(s, act):
     if act == LOGISTIC:
-        # Split by sign so that exp never overflows.
-        if s >= 0.0:
-            return 1.0 / (1.0 + np.exp(-s))
-        e = np.exp(s)
-        return e / (1.0 + e)
+        # exp(-s) may overflow to inf for very negative s: the limit 0 is right.
+        return 1.0 / (1.0 + np.exp(-s))
     return np.tanh(s)
 
 
@@ -53,43 +50,55 @@ def _activation_slope(a, act):
     return 1.0 - a * a
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _dot(w, p, x, off, n):
+    """``w[p:p + n] @ x[off:off + n]``."""
+    s = 0.0
+    for i in range(n):
+        s += w[p + i] * x[off + i]
+    return s
+
+
+@njit(cache=True, inline="always")
 def mlp_forward(w, sizes, act, bypass, z, acts, out):
     """Evaluate the network at ``z``; hidden activations go to ``acts``."""
     n_layers = sizes.shape[0] - 1
+    n_o = sizes[n_layers]
+    n_z = sizes[0]
     p = 0
     in_off = 0
     out_off = 0
-    for layer in range(n_layers):
+    for layer in range(n_layers - 1):
         n_in = sizes[layer]
-        n_out = sizes[layer + 1]
-        last = layer == n_layers - 1
-        bias = p + n_in * n_out
-        for j in range(n_out):
-            s = w[bias + j]
-            row = p + j * n_in
+        n_h = sizes[layer + 1]
+        bias = p + n_in * n_h
+        p_next = bias + n_h
+        last = layer == n_layers - 2
+        if last:
+            for k in range(n_o):
+                out[k] = w[p_next + n_h * n_o + k]
+        for j in range(n_h):
             if layer == 0:
-                for i in range(n_in):
-                    s += w[row + i] * z[i]
+                s = _dot(w, p + j * n_in, z, 0, n_in)
             else:
-                for i in range(n_in):
-                    s += w[row + i] * acts[in_off + i]
+                s = _dot(w, p + j * n_in, acts, in_off, n_in)
+            a = _activate(s + w[bias + j], act)
+            acts[out_off + j] = a
             if last:
-                out[j] = s
-            else:
-                acts[out_off + j] = _activate(s, act)
-        p = bias + n_out
-        if not last:
-            in_off = out_off
-            out_off += n_out
+                # The output layer summed as each unit of the last hidden
+                # layer is ready: no second pass over the activations.
+                for k in range(n_o):
+                    out[k] += w[p_next + k * n_h + j] * a
+        p = p_next
+        in_off = out_off
+        out_off += n_h
+    if n_layers == 1:
+        for k in range(n_o):
+            out[k] = w[n_z * n_o + k] + _dot(w, k * n_z, z, 0, n_z)
+    p += sizes[n_layers - 1] * n_o + n_o
     if bypass:
-        n_z = sizes[0]
-        for j in range(sizes[n_layers]):
-            s = 0.0
-            row = p + j * n_z
-            for i in range(n_z):
-                s += w[row + i] * z[i]
-            out[j] += s
+        for k in range(n_o):
+            out[k] += _dot(w, p + k * n_z, z, 0, n_z)
 
 
 @njit(cache=True)

@@ -21,6 +21,17 @@ import numpy as np
 from numba import njit
 
 from sysid_nn._kernels._mlp import mlp_forward, mlp_vjp, out_of_range
+from sysid_nn._kernels._recurrence import (
+    FULL_JAC,
+    NO_JAC,
+    NORMAL,
+    add_row,
+    copy_rows,
+    fill_rows,
+    finish,
+    keep_step,
+    new_block,
+)
 
 
 @njit(cache=True, inline="always")
@@ -29,8 +40,9 @@ def _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi):
     n_in = U.shape[1]
     for i in range(1, na + 1):
         src = t - i
+        fed = Yhat if src >= seg_start else Y
         for k in range(n_out):
-            phi[(i - 1) * n_out + k] = Yhat[src, k] if src >= seg_start else Y[src, k]
+            phi[(i - 1) * n_out + k] = fed[src, k]
     base = na * n_out
     for i in range(nb):
         for k in range(n_in):
@@ -58,107 +70,107 @@ def _rmatvec(S, x, out):
 
 
 @njit(cache=True)
+def _sensitivity_rows(
+    w, sizes, act, bypass, S, z, acts, J, r0, lag_rows, n_fed, v, gz, gphi, d1, d2
+):  # fmt: skip
+    """Rows ``J[r0:r0 + n_out]`` of one step by forward sensitivities (eq. 6).
+
+    The direct derivative of the network plus, carried through the delay
+    line, those of the ``n_fed`` fed-back outputs at rows ``lag_rows``.
+    """
+    n_out = v.shape[0]
+    for j in range(n_out):
+        gw = J[r0 + j]
+        gw[:] = 0.0
+        v[:] = 0.0
+        v[j] = 1.0
+        mlp_vjp(w, sizes, act, bypass, z, acts, v, gw, gz, d1, d2)
+        _rmatvec(S, gz, gphi)
+        for i in range(n_fed):
+            srow = lag_rows[i]
+            for k in range(n_out):
+                coef = gphi[i * n_out + k]
+                if coef != 0.0:
+                    for c in range(gw.shape[0]):
+                        gw[c] += coef * J[srow + k, c]
+
+
+@njit(cache=True)
 def tdl_run(
-    w,
-    sizes,
-    act,
-    bypass,
-    S,
-    Y,
-    U,
-    starts,
-    h,
-    na,
-    nb,
-    nk,
-    seg_len,
-    bound,
-    want_jac,
-    Yhat,
-    J,
-    Z,
-    A,
-    diverged,
-):
-    """Run the recurrence; optionally fill the Jacobian of the modelled rows.
+    w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, jac,
+    Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
+):  # fmt: skip
+    """Run the recurrence; optionally its Jacobian or normal equations.
 
     ``Yhat`` receives the outputs (history rows copied from ``Y``; NaN after
-    a divergence). ``J`` (``(n_modelled_rows * n_out, n_w)``) receives
-    ``d yhat / d w`` by forward sensitivities when ``want_jac``. ``Z`` and
-    ``A`` (per-row network inputs and hidden activations) are kept for the
-    adjoint pass. ``diverged[s]`` is the first modelled index of sequence
-    ``s`` whose output left ``[-bound, bound]``, or -1.
+    a divergence). ``jac`` is a mode of :mod:`._recurrence`: with
+    ``FULL_JAC``, ``J`` (``(n_modelled_rows * n_out, n_w)``) receives ``d
+    yhat / d w`` by forward sensitivities; with ``NORMAL``, ``J`` is a ring
+    of the last ``na + 1`` steps' rows (``((na + 1) * n_out, n_w)``) and
+    ``JtJ``, ``Jtr`` receive the sums over all rows of ``J' J`` and ``J'
+    (yhat - y)`` (``syrk`` is :data:`._recurrence.SYRK`). ``Z`` and ``A``
+    (per-row network inputs and hidden activations) are kept for the adjoint
+    pass when they have rows. ``diverged[s]`` is the first modelled index of
+    sequence ``s`` whose output left ``[-bound, bound]``, or -1.
     """
     n_out = Y.shape[1]
-    n_reg = S.shape[1]
     n_z = sizes[0]
     n_w = w.shape[0]
     width = np.max(sizes)
-    n_a = A.shape[1]
-    phi = np.empty(n_reg)
+    phi = np.empty(S.shape[1])
     z = np.empty(n_z)
-    acts = np.zeros(n_a)
-    gw = np.empty(n_w)
+    acts = np.zeros(max(1, A.shape[1]))
     out = np.empty(n_out)
     v = np.zeros(n_out)
     gz = np.empty(n_z)
-    gphi = np.empty(n_reg)
+    gphi = np.empty(S.shape[1])
     d1 = np.empty(width)
     d2 = np.empty(width)
+    Jb, rb = new_block(n_w, jac)
+    m = 0
+    ring = na + 1
+    lag_rows = np.empty(max(1, na), dtype=np.int64)
     row_base = 0
     for s in range(starts.shape[0] - 1):
         a = starts[s]
         b = starts[s + 1]
         diverged[s] = -1
-        for t in range(a, a + h):
-            for k in range(n_out):
-                Yhat[t, k] = Y[t, k]
+        copy_rows(Yhat, Y, a, a + h)
         seg_start = a + h
         for t in range(a + h, b):
-            if (t - a - h) % seg_len == 0:
+            if t - seg_start == seg_len:
                 seg_start = t
             _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi)
             _matvec(S, phi, z)
             mlp_forward(w, sizes, act, bypass, z, acts, out)
-            # Kept per row for the adjoint pass; copied from contiguous
-            # scratch buffers rather than writing through per-row views.
-            for i in range(n_z):
-                Z[t, i] = z[i]
-            for i in range(n_a):
-                A[t, i] = acts[i]
+            keep_step(Z, A, t, z, acts)
             if out_of_range(out, bound):
                 diverged[s] = t - a - h
-                for tt in range(t, b):
-                    for k in range(n_out):
-                        Yhat[tt, k] = np.nan
+                fill_rows(Yhat, t, b, np.full(n_out, np.nan))
                 break
             for k in range(n_out):
                 Yhat[t, k] = out[k]
-            if not want_jac:
+            if jac == NO_JAC:
                 continue
-            r0 = row_base + (t - a - h) * n_out
-            for j in range(n_out):
-                row = r0 + j
-                gw[:] = 0.0
-                v[:] = 0.0
-                v[j] = 1.0
-                mlp_vjp(w, sizes, act, bypass, z, acts, v, gw, gz, d1, d2)
-                _rmatvec(S, gz, gphi)
-                # Eq. 6 carried through the delay line: add the sensitivities
-                # of the fed-back outputs of this segment.
-                for i in range(1, na + 1):
-                    src = t - i
-                    if src < seg_start:
-                        break
-                    srow = row_base + (src - a - h) * n_out
-                    for k in range(n_out):
-                        coef = gphi[(i - 1) * n_out + k]
-                        if coef != 0.0:
-                            for c in range(n_w):
-                                gw[c] += coef * J[srow + k, c]
-                for c in range(n_w):
-                    J[row, c] = gw[c]
+            local = t - a - h
+            slot = local % ring  # of this step's rows in the ring (NORMAL)
+            r0 = row_base + local * n_out if jac == FULL_JAC else slot * n_out
+            # Rows of the fed-back outputs of this segment, newest first.
+            n_fed = min(na, t - seg_start)
+            for i in range(1, n_fed + 1):
+                if jac == FULL_JAC:
+                    lag_rows[i - 1] = r0 - i * n_out
+                else:
+                    lag_rows[i - 1] = (slot - i + (ring if slot < i else 0)) * n_out
+            _sensitivity_rows(
+                w, sizes, act, bypass, S, z, acts, J, r0, lag_rows, n_fed, v, gz,
+                gphi, d1, d2,
+            )  # fmt: skip
+            if jac == NORMAL:
+                for j in range(n_out):
+                    m = add_row(J[r0 + j], out[j] - Y[t, j], Jb, rb, m, JtJ, Jtr, syrk)
         row_base += (b - a - h) * n_out
+    finish(Jb, rb, m, JtJ, Jtr, syrk)
 
 
 @njit(cache=True)

@@ -1,0 +1,136 @@
+"""Tests of the stage objective and the solvers (normal equations, LM)."""
+
+from __future__ import annotations
+
+import tracemalloc
+import warnings
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from sysid_nn import ISSMRegressor, TDLRegressor
+from sysid_nn._base import _FREE_RUN
+from sysid_nn._issm import _Restricted
+from sysid_nn._solvers import _Objective, _solve_lm
+
+
+def _fitted(kind, n_outputs=1, length=300, n_seq=2, **params):
+    """A briefly fitted estimator, perturbed weights and its training data."""
+    rng = np.random.default_rng(n_outputs)
+    Xs = [rng.standard_normal((length, 2)) for _ in range(n_seq)]
+    # Stable first-order responses with a little noise.
+    ys = [
+        lfilter([0.3], [1.0, -0.8], X[:, :1] + 0.3 * X[:, 1:] ** 2, axis=0)
+        @ np.ones((1, n_outputs))
+        + 0.05 * rng.standard_normal((length, n_outputs))
+        for X in Xs
+    ]
+    if kind == "tdl":
+        defaults = dict(output_lags=3, input_lags=2, hidden_layer_sizes=(4,))
+        cls = TDLRegressor
+    else:
+        defaults = dict(n_states=3, hidden_layer_sizes=(4,))
+        cls = ISSMRegressor
+    defaults.update(n_init=1, max_iter=1, early_stopping=False, random_state=0)
+    defaults.update(params)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = cls(**defaults).fit(Xs, ys)
+    w = est.coefs_ + 0.05 * rng.standard_normal(len(est.coefs_))
+    return est, est._stack(Xs, ys), w
+
+
+def _objective(est, data, seg, full=False):
+    n_res = len(data.modelled) * est.n_outputs_
+    return _Objective(est, data, seg, est._penalty_mask(), n_res, full_jacobian=full)
+
+
+CASES = [
+    ("tdl", 1, {}),
+    ("tdl", 2, {"activation": "logistic", "alpha": 1e-2}),
+    ("tdl", 1, {"hidden_layer_sizes": (3, 2), "linear_bypass": False}),
+    ("issm", 1, {}),
+    ("issm", 2, {"activation": "logistic", "alpha": 1e-2}),
+]
+
+
+@pytest.mark.parametrize(("kind", "n_outputs", "params"), CASES)
+@pytest.mark.parametrize("seg", [1, 7, _FREE_RUN])
+def test_accumulated_normal_equations_equal_full_jacobian(kind, n_outputs, params, seg):
+    # 2 x 300 rows per output: several blocks of the accumulation, one partial.
+    est, data, w = _fitted(kind, n_outputs, **params)
+    objective = _objective(est, data, seg)
+    assert (est._run(w, data, seg, False)[2] < 0).all()
+    J, r = objective.jacobian(w), objective.residuals(w)
+    JtJ, Jtr = objective.normal_equations(w)
+    assert J.shape[0] > 512
+    scale = np.abs(J.T @ J).max()
+    np.testing.assert_allclose(JtJ, J.T @ J, rtol=1e-10, atol=1e-12 * scale)
+    np.testing.assert_allclose(Jtr, J.T @ r, rtol=1e-10, atol=1e-12 * scale)
+    # The plain run the normal equations come with is the plain run.
+    Yhat = est._run(w, data, seg, False)[0]
+    np.testing.assert_array_equal(est._run(w, data, seg, "normal")[0], Yhat)
+
+
+class _Recorder:
+    """Tracker that records every accepted iterate."""
+
+    stopped = False
+
+    def __init__(self):
+        self.iterates = []
+
+    def __call__(self, w):
+        self.iterates.append(w.copy())
+
+
+@pytest.mark.parametrize(("kind", "seg"), [("tdl", 7), ("tdl", _FREE_RUN), ("issm", 1)])
+def test_lm_iterates_equal_those_of_the_full_jacobian(kind, seg):
+    est, data, w = _fitted(kind, 1, length=400, hidden_layer_sizes=(3,), alpha=1e-3)
+    runs = []
+    for full in (True, False):
+        tracker = _Recorder()
+        objective = _objective(est, data, seg, full)
+        w_end, n_eval, converged = _solve_lm(objective, w, 10, 1e-12, tracker)
+        runs.append((tracker.iterates, n_eval, converged, objective.loss(w_end)))
+    (steps_full, *end_full), (steps_acc, *end_acc) = runs
+    assert len(steps_full) == len(steps_acc) >= 5
+    assert end_full[:2] == end_acc[:2]
+    # Each step solves with J'J (condition number about 1e8 here), which
+    # amplifies the different summation order of the two ways of forming it
+    # by roughly ten per step: early iterates agree to 1e-12 of the step,
+    # later ones less, and the end point to the loss.
+    for a, b in zip(steps_full[:3], steps_acc[:3], strict=True):
+        assert np.abs(a - b).max() <= 1e-9 * np.abs(a - w).max()
+    assert np.isclose(end_acc[2], end_full[2], rtol=1e-8)
+
+
+def test_restricted_normal_equations_are_those_of_the_subset():
+    est, data, w = _fitted("issm", 2, alpha=1e-2)
+    objective = _objective(est, data, 1)
+    idx = est._innovation_index()
+    sub = _Restricted(objective, w, idx)
+    J = objective.jacobian(w)[:, idx]
+    r = objective.residuals(w)
+    JtJ, Jtr = sub.normal_equations(w[idx])
+    np.testing.assert_allclose(JtJ, J.T @ J, rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(Jtr, J.T @ r, rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("kind", ["tdl", "issm"])
+def test_normal_equations_memory_does_not_grow_with_the_jacobian(kind):
+    peaks = []
+    for length in (1000, 4000):
+        est, data, w = _fitted(kind, 1, length=length, n_seq=1)
+        objective = _objective(est, data, _FREE_RUN)
+        objective.normal_equations(w)  # compiled and warm
+        objective._cache_w = None
+        tracemalloc.start()
+        objective.normal_equations(w)
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+    growth = peaks[1] - peaks[0]
+    full_jacobian = 3000 * len(w) * 8
+    # Only per-row outputs (a few numbers per row) may grow, not N x P.
+    assert growth < 3000 * 8 * 8 < full_jacobian / 3, (growth, full_jacobian)
