@@ -33,10 +33,9 @@ from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
 from sysid_nn import _uncertainty
 from sysid_nn._progress import report_stage
+from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 from sysid_nn._state_estimation import fit_initial_condition, noise_variance
 from sysid_nn._validation import check_same_width
-
-from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 
 __all__ = ["DivergenceWarning"]
 

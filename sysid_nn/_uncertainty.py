@@ -45,6 +45,13 @@ _INTERVALS = ("prediction", "confidence")
 _SENSITIVITY_LIMIT = 1e9
 
 
+#: Largest ``n_rows * n_outputs * n_weights`` for which the covariance forms
+#: the training run's full Jacobian (8 bytes each, about 3 copies at once):
+#: beyond it ``J^T J`` is accumulated, as the solver does, so that a fit's
+#: memory stays bounded on records of a million samples.
+_FULL_JACOBIAN_LIMIT = 2**24
+
+
 @dataclass
 class _Normal:
     """What the covariance needs from the Jacobian of a training run."""
@@ -71,14 +78,17 @@ def _normal_matrix(est, w, data, seg, cols=None) -> _Normal | None:
     rows, or over windows of consecutive rows). Returns ``None`` if the run
     diverges.
     """
+    rows = data.modelled
+    n_w = len(w) if cols is None else len(cols)
+    if len(rows) * est.n_outputs_ * len(w) > _FULL_JACOBIAN_LIMIT:
+        return _accumulated_normal(est, w, data, seg, cols)
     Yhat, J, diverged, _ = est._run(w, data, seg, True)
     if (diverged >= 0).any():
         return None
     if cols is not None:
         J = J[:, cols]
-    rows = data.modelled
     R = Yhat[rows] - data.Y[rows]
-    p, n_w = R.shape[1], J.shape[1]
+    p = R.shape[1]
     # Gradient term of each time step, summed over the outputs.
     G = (R.reshape(-1, 1) * J).reshape(len(rows), p, n_w).sum(axis=1)
     lengths = np.diff(data.starts) - data.h
@@ -94,6 +104,43 @@ def _normal_matrix(est, w, data, seg, cols=None) -> _Normal | None:
         n_rows=len(rows),
         max_sensitivity=float(np.abs(J).max(initial=0.0)),
         bandwidth=L,
+    )
+
+
+def _accumulated_normal(est, w, data, seg, cols) -> _Normal | None:
+    """:class:`_Normal` of a run too long for its full Jacobian.
+
+    ``J^T J`` is accumulated by the kernels while the recurrence runs, as
+    Levenberg-Marquardt does, so memory does not grow with ``N x P``. The
+    long-run covariance of the gradient terms needs the Jacobian's rows, so
+    it is taken as that of white residuals, ``s^2 J^T J``, and the caller is
+    warned that the band then ignores their autocorrelation.
+    """
+    Yhat, (JtJ, _), diverged, _ = est._run(w, data, seg, "normal", keep_state=False)
+    if (diverged >= 0).any():
+        return None
+    rows = data.modelled
+    R = Yhat[rows] - data.Y[rows]
+    if cols is not None:
+        JtJ = JtJ[np.ix_(cols, cols)]
+    rss = (R * R).sum(axis=0)
+    warnings.warn(
+        f"The training records of this {type(est).__name__} hold {len(rows)} "
+        f"samples: more than the full Jacobian of the bands' autocorrelation-"
+        "robust covariance fits in memory. Its covariance assumes white "
+        "residuals, so the bands of return_std=True may be too narrow where the "
+        "residuals are autocorrelated (a free run's usually are); check them "
+        "with sysid_nn.uncertainty.ensemble_std.",
+        UserWarning,
+        stacklevel=5,
+    )
+    return _Normal(
+        JtJ=JtJ,
+        meat=float(rss.sum()) / R.size * JtJ,
+        rss=rss,
+        n_rows=len(rows),
+        max_sensitivity=np.nan,
+        bandwidth=0,
     )
 
 

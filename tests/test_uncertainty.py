@@ -106,6 +106,29 @@ def test_noise_variance_estimates_the_measurement_noise():
     assert model.n_effective_params_ == pytest.approx(4.0)
 
 
+def test_long_records_use_the_accumulated_normal_matrix(monkeypatch):
+    """Past the memory limit the full Jacobian is never formed.
+
+    The covariance then assumes white residuals: on a white-noise linear
+    output-error record it agrees with the autocorrelation-robust one.
+    """
+    from sysid_nn import _uncertainty
+
+    rng = np.random.default_rng(2)
+    u, _, y = linear_record(2000, rng)
+    full = linear_model().fit(u, y)
+    monkeypatch.setattr(_uncertainty, "_FULL_JACOBIAN_LIMIT", 1000)
+    with pytest.warns(UserWarning, match="assumes white residuals"):
+        bounded = linear_model().fit(u, y)
+    np.testing.assert_array_equal(bounded.coefs_, full.coefs_)
+    np.testing.assert_allclose(bounded.noise_variance_, full.noise_variance_)
+    np.testing.assert_allclose(
+        np.diag(bounded.coefs_covariance_), np.diag(full.coefs_covariance_), rtol=0.3
+    )
+    _, std = bounded.simulate(u[:200], return_std=True)
+    assert np.all(np.isfinite(std)) and np.all(std > 0)
+
+
 def _finite_difference_std(model, run, step=1e-4):
     """Propagate ``coefs_covariance_`` by central differences of ``run``.
 
