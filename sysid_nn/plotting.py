@@ -42,9 +42,11 @@ __all__ = [
     "plot_response",
 ]
 
-# The ``ax`` (and ``title``) parameters of the plotting functions, documented once.
+# The ``ax`` (and ``title``) parameters of the plotting functions, and their
+# time axis, documented once.
 _AX_DOC = "ax : Axes, optional\n    Axes to draw on; a new figure if None."
 _document_axes = fill_doc(
+    t="t : array-like of shape (n_samples,)\n    Time.",
     ax=_AX_DOC,
     title_ax="title : str\n    Axes title.\n" + _AX_DOC,
     ax_pair="ax : pair of Axes, optional\n    Axes for the two panels; a new "
@@ -161,8 +163,7 @@ def plot_records(
 
     Parameters
     ----------
-    t : array-like of shape (n_samples,)
-        Time.
+    %(t)s
     excitation, displacement : array-like
         One record ``(n_samples,)``, or ``(n_records, n_samples)`` with one
         row per record (all drawn).
@@ -214,8 +215,7 @@ def plot_response(
 
     Parameters
     ----------
-    t : array-like of shape (n_samples,)
-        Time.
+    %(t)s
     measured : array-like of shape (n_samples,)
         Measured (Runge-Kutta simulated) response, drawn solid.
     model : array-like of shape (n_samples,) or dict of str to array-like
@@ -579,22 +579,22 @@ def plot_residual_analysis(
     return top.figure
 
 
+@_document_axes
 def plot_band(
     t: Any,
     mean: Any,
     std: Any,
     *,
     level: float = 0.95,
-    label: str = "model",
     color: str | None = None,
+    label: str = "model",
     ax: Axes | None = None,
 ) -> Axes:
     """Predicted or simulated response with its shaded interval.
 
     Parameters
     ----------
-    t : array-like of shape (n_samples,)
-        Time.
+    %(t)s
     mean : array-like of shape (n_samples,)
         Predicted or simulated response, drawn as a line.
     std : array-like of shape (n_samples,)
@@ -602,12 +602,11 @@ def plot_band(
     level : float, default=0.95
         Level of the Gaussian interval shaded around ``mean`` (see
         :func:`sysid_nn.uncertainty.normal_interval`).
-    label : str, default="model"
-        Legend text of the line; the band is labelled with its level.
     color : str, optional
         Colour of the line and the band; the next colour of the Axes if None.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    label : str, default="model"
+        Legend text of the line; the band is labelled with its level.
+    %(ax)s
 
     Returns
     -------
