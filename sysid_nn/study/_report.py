@@ -327,6 +327,7 @@ def write_report(
     lines += [f"- {line}" for line in _verdicts(summary, labels, records)] + [""]
     lines += [_md_table(glance), ""]
     whose = "its" if len(named) == 1 else "each output's"
+    units = f"the units of the {named[0]}" if len(named) == 1 else "each output's units"
     lines += [
         f"NRMSE: root-mean-square error of the {' and '.join(named)} over "
         f"{whose} standard deviation "
@@ -336,9 +337,9 @@ def write_report(
             if "sim. / linear" in glance
             else ""
         )
-        + ". μ_Ns and σ_Ns (eq. 19-20) are in the output's units, averaged over "
-        f"the {records} (N_s) as in figs 4.5 and 4.7. Residual tests at the "
-        f"{100 * (1 - alpha):g} % level on every record (figs 4.3-4.4).",
+        + f". μ_Ns and σ_Ns (eq. 19-20) are in {units}, averaged over the "
+        f"N_s {records} as in figs 4.5 and 4.7. Residual tests at the "
+        f"{100 * (1 - alpha):g} % level on each of the {records} (figs 4.3-4.4).",
         "",
     ]
     if "issm_paper" in models or "tdl_paper" in models:
