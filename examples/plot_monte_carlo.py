@@ -108,19 +108,20 @@ print(summary[columns].to_string(index=False, float_format=lambda v: f"{v:.3g}")
 # Figures 4.5 and 4.7
 # -------------------
 # :func:`~sysid_nn.plotting.plot_error_statistics` draws the bars of the
-# paper from ``{model: ErrorStatistics}``, each labelled with its value; when
+# paper from ``{model: ErrorStatistics}`` (the study's statistics are per
+# mode and scored output, here the displacement), each labelled with its value; when
 # the bars differ by orders of magnitude (one-step errors here), the axis is
 # logarithmic in both directions. A model whose statistics are NaN (a
 # divergent realisation) has no bar.
 fig, (ax_pred, ax_sim) = plt.subplots(1, 2, figsize=(10, 4))
 plot_error_statistics(
-    evaluation.statistics["prediction"],
+    evaluation.statistics["prediction"]["displacement"],
     unit="m",
     title="One-step prediction errors (fig. 4.5)",
     ax=ax_pred,
 )
 plot_error_statistics(
-    evaluation.statistics["simulation"],
+    evaluation.statistics["simulation"]["displacement"],
     unit="m",
     title="Simulation errors (fig. 4.7)",
     ax=ax_sim,
@@ -162,8 +163,8 @@ print(
     np.allclose(
         [stats.mu, stats.sigma],
         [
-            evaluation.statistics["simulation"][tdl.label].mu,
-            evaluation.statistics["simulation"][tdl.label].sigma,
+            evaluation.statistics["simulation"]["displacement"][tdl.label].mu,
+            evaluation.statistics["simulation"]["displacement"][tdl.label].sigma,
         ],
         equal_nan=True,
     ),

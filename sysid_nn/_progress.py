@@ -1,15 +1,21 @@
-"""Training progress of the recurrent estimators (``verbose``), on stderr.
+"""Progress on stderr: estimators' training stages, and any long loop.
 
-On a terminal each restart gets a tqdm bar that advances by training stage;
-anywhere else (a log file, a pipe, a notebook's captured stream) every stage
-is one plain line, with no carriage returns to garble the log. Restarts that
-run in joblib worker processes report from there the same way.
+On a terminal progress is a tqdm bar; anywhere else (a log file, a pipe, a
+notebook's captured stream) every step is one plain line, with no carriage
+returns to garble the log. :func:`report_stage` reports the recurrent
+estimators' training (``verbose``; restarts that run in joblib worker
+processes report from there the same way); :func:`track` wraps the long
+loops of the study (fitting, evaluating, figures).
+
+Display only, not part of any estimator's API: the study reaches it through
+``sysid_nn.study._progress`` so that both decide terminal-or-not the same way.
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 # One open bar per restart of the process that trains it.
@@ -22,6 +28,44 @@ def _interactive() -> bool:
         return bool(isatty and isatty())
     except ValueError:  # a closed stream
         return False
+
+
+def track(items: Iterable, total: int, desc: str, show: bool) -> Iterator:
+    """Iterate over ``items``, showing progress on stderr when ``show``.
+
+    Parameters
+    ----------
+    items : iterable
+        What to iterate over.
+    total : int
+        Number of items.
+    desc : str
+        What the loop does (``"fitting"``, ``"figures"``, ...).
+    show : bool
+        False: no output at all.
+
+    Returns
+    -------
+    iterator
+        The items unchanged: on a terminal through a tqdm bar that disappears
+        when done, elsewhere followed by one line per item,
+        ``"<desc>: <i>/<total> (<seconds> s)"``.
+    """
+    if not show:
+        return iter(items)
+    if _interactive():
+        from tqdm.auto import tqdm
+
+        return iter(tqdm(items, total=total, desc=desc, leave=False, file=sys.stderr))
+    return _lines(items, total, desc)
+
+
+def _lines(items: Iterable, total: int, desc: str) -> Iterator:
+    start = time.perf_counter()
+    for i, item in enumerate(items, 1):
+        yield item  # the line follows the work done with the item
+        elapsed = time.perf_counter() - start
+        print(f"{desc}: {i}/{total} ({elapsed:.1f} s)", file=sys.stderr, flush=True)
 
 
 def report_stage(

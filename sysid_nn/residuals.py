@@ -42,6 +42,7 @@ tests", *Int. J. Control* 60(6), 1994.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -866,6 +867,10 @@ class ResidualAnalysis:
         ``"prediction"`` or ``"simulation"``.
     horizon : int
         Prediction horizon (prediction mode).
+    input_names : tuple of str or None
+        Names of the input columns: a DataFrame's column names, else the
+        estimator's ``feature_names_in_``, else None. :meth:`plot` shows
+        them in the cross-correlation legend.
 
     Examples
     --------
@@ -889,6 +894,7 @@ class ResidualAnalysis:
     divergent: tuple[int, ...]
     mode: str
     horizon: int
+    input_names: tuple[str, ...] | None = None
 
     @property
     def passed(self) -> bool:
@@ -923,7 +929,13 @@ class ResidualAnalysis:
             return pd.DataFrame(columns=columns)
         return pd.concat(frames, ignore_index=True)[columns]
 
-    def plot(self, sequence: int | str | None = None, output: int = 0) -> Any:
+    def plot(
+        self,
+        sequence: int | str | None = None,
+        output: int = 0,
+        *,
+        input_names: Sequence[str] | None = None,
+    ) -> Any:
         """Autocorrelation and cross-correlation panels (figs 4.3-4.4).
 
         Parameters
@@ -932,6 +944,9 @@ class ResidualAnalysis:
             Which result to draw; default ``"pooled"`` for a list, else 0.
         output : int, default=0
             Output column.
+        input_names : sequence of str, optional
+            Legend text of every input column; default :attr:`input_names`
+            (the data's column names), else ``input i``.
 
         Returns
         -------
@@ -942,8 +957,10 @@ class ResidualAnalysis:
 
         if sequence is None:
             sequence = "pooled" if isinstance(self.residuals, list) else 0
-        seq = sequence
-        return plot_residual_analysis(self, sequence=seq, output=output)
+        names = self.input_names if input_names is None else input_names
+        return plot_residual_analysis(
+            self, sequence=sequence, output=output, input_names=names
+        )
 
 
 _SUMMARY_COLUMNS = [
@@ -1156,4 +1173,15 @@ def analyze_residuals(
         divergent=divergent,
         mode=mode,
         horizon=int(horizon),
+        input_names=_input_names(estimator, X),
     )
+
+
+def _input_names(estimator: Any, X: Any) -> tuple[str, ...] | None:
+    """The inputs' column names: of the DataFrame(s) given, else the estimator's."""
+    first = X[0] if isinstance(X, (list, tuple)) and len(X) else X
+    columns = getattr(first, "columns", None)
+    if columns is not None:
+        return tuple(map(str, columns))
+    names = getattr(estimator, "feature_names_in_", None)
+    return None if names is None else tuple(map(str, names))

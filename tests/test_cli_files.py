@@ -3,6 +3,7 @@ sample times, columns, units, progress and exit statuses."""
 
 import argparse
 import io
+from pathlib import Path
 
 import joblib
 import numpy as np
@@ -242,7 +243,7 @@ def test_file_content_errors_exit_1_naming_file_and_column(
 
 
 # ---------------------------------------------------- validate, many outputs
-def test_validate_reports_every_output_with_units(frame, tmp_path, capsys):
+def test_validate_reports_every_output_with_units(frame, tmp_path, capsys, monkeypatch):
     named = frame.rename(
         columns={"displacement": "displacement [m]", "velocity": "velocity (m/s)"}
     )
@@ -264,8 +265,10 @@ def test_validate_reports_every_output_with_units(frame, tmp_path, capsys):
 
     out = tmp_path / "validation"
     argv = ["validate", "--model", str(model), str(table), "--split-by", "realization"]
+    drawn = _figure_texts(monkeypatch)
     assert main([*argv, "--out", str(out), "--max-lag", "5"]) == 0
-    printed = capsys.readouterr().out
+    captured = capsys.readouterr()
+    printed = captured.out
     lines = [line for line in printed.splitlines() if "NRMSE" in line and ":" in line]
     assert [line.split(":")[0].strip() for line in lines[1:]] == [
         "displacement [m]",
@@ -273,6 +276,58 @@ def test_validate_reports_every_output_with_units(frame, tmp_path, capsys):
     ]
     assert "RMSE" in lines[1] and " m)" in lines[1] and " m/s)" in lines[2]
     assert "displacement" not in printed.replace("displacement [m]", "")
+    # The report's steps show progress as plain lines (stderr is not a terminal).
+    assert "evaluating: 3/3" in captured.err and "\r" not in captured.err
+
+    # Report and tables: every output under its column name, with its unit.
+    report = (out / "report.md").read_text()
+    rows = [line for line in report.splitlines() if line.startswith("| ISSM")]
+    outputs = [line.split(" | ")[1] for line in rows if "ISSMRegressor" not in line]
+    assert outputs == 3 * ["displacement [m]", "velocity (m/s)"]  # glance, 4.3, 4.4
+    assert "displacement [m] and velocity (m/s)" in report
+    assert "[m] [m]" not in report and "sim. / linear" not in report
+    assert "realisation" not in report
+    summary = pd.read_csv(out / "summary.csv")
+    assert sorted(set(summary["output"])) == ["displacement [m]", "velocity (m/s)"]
+    assert (
+        len(pd.read_csv(out / "results.csv")) == 3 * 2 * 2
+    )  # records x outputs x modes
+
+    # Figures: both outputs on the axes, units once, the input by its name.
+    for name in (
+        "fig4_2_prediction.png",
+        "fig4_3_residual_autocorrelation.png",
+        "fig4_4_residual_cross_correlation.png",
+        "fig4_5_prediction_error_statistics.png",
+        "fig4_6_simulation.png",
+        "fig4_7_simulation_error_statistics.png",
+    ):
+        text = " ".join(drawn[name])
+        assert "displacement [m]" in text and "velocity (m/s)" in text, name
+        assert "[m] [m]" not in text and "input 0" not in text, name
+    assert "force [kN]" in drawn["fig4_4_residual_cross_correlation.png"]
+    assert "error [m/s]" in drawn["fig4_7_simulation_error_statistics.png"]
+    assert "record 0" in " ".join(drawn["fig4_2_prediction.png"])
+
+
+def _figure_texts(monkeypatch):
+    """Record every title, axis label and legend text of the figures saved."""
+    from matplotlib.figure import Figure
+
+    drawn = {}
+    savefig = Figure.savefig
+
+    def recording(fig, fname, *args, **kwargs):
+        texts = [fig._suptitle.get_text()] if fig._suptitle else []
+        for ax in fig.axes:
+            texts += [ax.get_title(), ax.get_xlabel(), ax.get_ylabel()]
+            legend = ax.get_legend()
+            texts += [t.get_text() for t in legend.get_texts()] if legend else []
+        drawn[Path(fname).name] = texts
+        return savefig(fig, fname, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", recording)
+    return drawn
 
 
 def test_validate_max_lag_is_checked_against_the_records(tmp_path, capsys):
@@ -348,6 +403,29 @@ def test_progress_bar_on_a_terminal(monkeypatch):
     silent = TDLRegressor(verbose=False)
     report_stage(silent, (0, 1), (0, 3), "segment 1", 4, lambda: 1 / 0, 0.25)
     assert screen.getvalue() == text  # nothing, and the loss is not computed
+
+
+def test_study_progress_is_plain_lines_off_a_terminal(monkeypatch):
+    from sysid_nn.study._progress import _progress
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    for stream, bar in ((io.StringIO(), False), (Terminal(), True)):
+        monkeypatch.setattr("sys.stderr", stream)
+        assert list(_progress(iter("abc"), 3, "figures", True)) == ["a", "b", "c"]
+        text = stream.getvalue()
+        assert ("\r" in text) == bar, text
+        if not bar:
+            lines = text.splitlines()
+            assert [line.split(" (")[0] for line in lines] == [
+                "figures: 1/3",
+                "figures: 2/3",
+                "figures: 3/3",
+            ]
+        assert list(_progress("abc", 3, "figures", False)) == ["a", "b", "c"]
+        assert stream.getvalue() == text  # show=False: silent
 
 
 def test_fit_writes_nothing_to_stdout_but_results(files, tmp_path, capsys):

@@ -498,3 +498,38 @@ def test_analyze_residuals_bad_arguments():
         analyze_residuals(FirstOrderARX(), X, y[:150])
     with pytest.raises(ValueError, match="both be arrays or both be lists"):
         analyze_residuals(FirstOrderARX(), [X], y)
+
+
+def test_plot_names_the_inputs_by_their_columns():
+    import matplotlib.pyplot as plt
+
+    class Zero:
+        def simulate(self, X):
+            if isinstance(X, list):
+                return [np.zeros(len(x)) for x in X]
+            return np.zeros(len(X))
+
+    rng = np.random.default_rng(0)
+    X = pd.DataFrame(rng.standard_normal((300, 2)), columns=["force [N]", "wind"])
+    y = rng.standard_normal(300)
+
+    def legend(analysis, **kwargs):
+        fig = analysis.plot(**kwargs)
+        texts = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+        plt.close(fig)
+        return texts[:2]
+
+    on_frame = analyze_residuals(Zero(), X, y, mode="simulation", max_lag=5)
+    assert on_frame.input_names == ("force [N]", "wind")
+    assert legend(on_frame) == ["force [N]", "wind"]
+    assert legend(on_frame, input_names=["F", "v"]) == ["F", "v"]
+    # A list of frames, and arrays for an estimator fitted on named columns.
+    on_list = analyze_residuals(Zero(), [X, X], [y, y], mode="simulation", max_lag=5)
+    assert legend(on_list) == ["force [N]", "wind"]
+    named = Zero()
+    named.feature_names_in_ = np.array(["a", "b"], dtype=object)
+    on_array = analyze_residuals(named, X.to_numpy(), y, mode="simulation", max_lag=5)
+    assert legend(on_array) == ["a", "b"]
+    anonymous = analyze_residuals(Zero(), X.to_numpy(), y, mode="simulation", max_lag=5)
+    assert anonymous.input_names is None
+    assert legend(anonymous) == ["input 0", "input 1"]

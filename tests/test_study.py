@@ -34,6 +34,7 @@ TINY = {
 RESULT_COLUMNS = [
     "realization",
     "model",
+    "output",
     "mode",
     "dt",
     "nrmse",
@@ -112,7 +113,7 @@ def test_report_sections_and_setup(study):
 def test_summary_reuses_eq_19_20_statistics(study):
     ev, summary = study.evaluation, study.summary
     row = summary.query("model == 'issm' and mode == 'simulation'").iloc[0]
-    stats = ev.statistics["simulation"]["ISSM (default)"]
+    stats = ev.statistics["simulation"]["displacement"]["ISSM (default)"]
     assert row["mu_Ns"] == stats.mu and row["sigma_Ns"] == stats.sigma
     per = ev.results.query("model == 'issm' and mode == 'simulation'")
     np.testing.assert_allclose(per["mean"].mean(), stats.mu)

@@ -11,13 +11,40 @@ from sklearn.utils import Bunch
 
 from sysid_nn.plotting import panel_figure
 from sysid_nn.study._models import StudyModel
+from sysid_nn.study._scoring import _scored
 
 
 def _label(data: Bunch, field: str) -> str:
-    """Axis label of a record field: its name and, when known, its unit."""
+    """Axis label of a record field: its name and, when known, its unit.
+
+    A unit the name already carries (``"x [m]"``, ``"v (m/s)"``) is not repeated.
+    """
     name = data.get("names", {}).get(field, field)
     unit = data.get("units", {}).get(field)
-    return f"{name} [{unit}]" if unit else name
+    if not unit or any(f"{a}{unit}{b}" in name for a, b in ("[]", "()")):
+        return name
+    return f"{name} [{unit}]"
+
+
+def _first_record(data: Bunch) -> str:
+    """How the figures name the record they draw (the study's or the user's)."""
+    return f"{data.get('record_name', 'test realisation')} 0"
+
+
+def _panels(models, evaluation) -> list[tuple[str, StudyModel, int, str]]:
+    """``(name, model, column, field)`` of every model's scored outputs."""
+    return [
+        (name, model, k, field)
+        for name, model in models.items()
+        for k, field in _scored(model, evaluation.outputs)
+    ]
+
+
+def _panel_title(model: StudyModel, field: str, data: Bunch, evaluation) -> str:
+    """The model's label, and the output's when several outputs are scored."""
+    if len(evaluation.outputs) == 1:
+        return model.label
+    return f"{model.label}: {_label(data, field)}"
 
 
 def _model_grid(model: StudyModel, n: int, dt: float) -> np.ndarray:
@@ -27,15 +54,20 @@ def _model_grid(model: StudyModel, n: int, dt: float) -> np.ndarray:
 def _response_figure(models, data, evaluation, mode, title) -> Any:
     from sysid_nn.plotting import plot_response
 
-    fig, axes = panel_figure(len(models))
-    for ax, (name, model) in zip(axes, models.items(), strict=True):
+    panels = _panels(models, evaluation)
+    fig, axes = panel_figure(len(panels))
+    for ax, (name, model, k, field) in zip(axes, panels, strict=True):
         (_,), (y,) = model.arrays(data.test, [0])
-        y0 = y if y.ndim == 1 else y[:, 0]
-        e = evaluation.errors[name, mode][0]
-        t = _model_grid(model, y0.size, data.dt)
-        ylabel = _label(data, model.outputs[0])
-        plot_response(t, y0, y0 - e, label=model.label, ylabel=ylabel, ax=ax)
-        ax.set_title(f"{title}: {model.label}, test realisation 0", fontsize=9)
+        y_k = y.reshape(len(y), -1)[:, k]
+        e = evaluation.errors[name, mode, field][0]
+        t = _model_grid(model, y_k.size, data.dt)
+        ylabel = _label(data, field)
+        plot_response(t, y_k, y_k - e, label=model.label, ylabel=ylabel, ax=ax)
+        ax.set_title(
+            f"{title}: {_panel_title(model, field, data, evaluation)}, "
+            f"{_first_record(data)}",
+            fontsize=9,
+        )
     return fig
 
 
@@ -55,11 +87,13 @@ def _correlation_figure(models, data, evaluation, kind) -> Any:
     from sysid_nn.residuals import cross_correlation_test, whiteness_test
 
     span = _lag_span(models, data, evaluation)
-    fig, axes = panel_figure(len(models))
-    for ax, (name, model) in zip(axes, models.items(), strict=True):
-        e = evaluation.errors[name, "prediction"][0]
+    panels = _panels(models, evaluation)
+    fig, axes = panel_figure(len(panels))
+    for ax, (name, model, _, field) in zip(axes, panels, strict=True):
+        e = evaluation.errors[name, "prediction", field][0]
+        label = _panel_title(model, field, data, evaluation)
         if not np.all(np.isfinite(e)):
-            ax.text(0.5, 0.5, f"{model.label}: prediction diverged", ha="center")
+            ax.text(0.5, 0.5, f"{label}: prediction diverged", ha="center")
             continue
         step = data.dt * model.step
         lags = int(np.ceil(span / step - 1e-9))
@@ -67,19 +101,19 @@ def _correlation_figure(models, data, evaluation, kind) -> Any:
         ax.axvspan(0 if kind == "acf" else -tested, tested, color="0.92", zorder=0)
         if kind == "acf":
             found = whiteness_test(e, lags, evaluation.alpha)
-            plot_autocorrelation(found, dt=step, title=model.label, ax=ax)
+            plot_autocorrelation(found, dt=step, title=label, ax=ax)
             ax.set_xlim(-0.02 * span, 1.02 * span)
         else:
             (X,), _ = model.arrays(data.test, [0])
             found = cross_correlation_test(e, X, lags, evaluation.alpha)
             names = [_label(data, field) for field in model.inputs]
             plot_cross_correlation(
-                found, dt=step, input_names=names, title=model.label, ax=ax
+                found, dt=step, input_names=names, title=label, ax=ax
             )
             ax.set_xlim(-1.02 * span, 1.02 * span)
     period = data.get("natural_period")
     fig.suptitle(
-        f"One-step prediction errors, test realisation 0: lags up to {span:.3g} s"
+        f"One-step prediction errors, {_first_record(data)}: lags up to {span:.3g} s"
         + (f" (natural period {period:.3g} s)" if period else "")
         + f";\nshaded: the lags of the tables' tests (up to {evaluation.max_lag} "
         "samples of each model)",
@@ -88,11 +122,19 @@ def _correlation_figure(models, data, evaluation, kind) -> Any:
     return fig
 
 
-def _statistics_figure(evaluation, mode, title, unit) -> Any:
+def _statistics_figure(data, evaluation, mode, title) -> Any:
+    """One panel per scored output: its errors' eq. 19-20 bars, in its unit."""
     from sysid_nn.plotting import plot_error_statistics
 
-    fig, (ax,) = panel_figure(1, row_height=3.6)
-    plot_error_statistics(evaluation.statistics[mode], unit=unit, title=title, ax=ax)
+    outputs = evaluation.outputs
+    fig, axes = panel_figure(len(outputs), row_height=3.6)
+    for ax, field in zip(axes, outputs, strict=True):
+        plot_error_statistics(
+            evaluation.statistics[mode][field],
+            unit=data.get("units", {}).get(field),
+            title=title if len(outputs) == 1 else f"{title}: {_label(data, field)}",
+            ax=ax,
+        )
     return fig
 
 
@@ -145,7 +187,7 @@ def hysteresis_loops(
     for name, model in models.items():
         (X,), _ = model.arrays(data.test, [0])
         cut = slice(None, None, model.step)
-        e = evaluation.errors[name, "simulation"][0]
+        e = evaluation.errors[name, "simulation", "displacement"][0]
         x_m = x[cut] - e
         if not np.all(np.isfinite(x_m)):
             continue
@@ -213,7 +255,7 @@ def _hysteresis_figure(loops: Bunch, data: Bunch) -> Any:
 #: Figure files of a study directory, in the paper's order.
 FIGURES = {
     "fig4_1_training_data.png": "Training data (fig. 4.1)",
-    "fig4_2_prediction.png": "One-step prediction on a test realisation (fig. 4.2)",
+    "fig4_2_prediction.png": "One-step prediction of the first test record (fig. 4.2)",
     "fig4_3_residual_autocorrelation.png": (
         "Autocorrelation of prediction errors (fig. 4.3)"
     ),
@@ -223,7 +265,7 @@ FIGURES = {
     "fig4_5_prediction_error_statistics.png": (
         "μ_Ns and σ_Ns of prediction errors (fig. 4.5)"
     ),
-    "fig4_6_simulation.png": "Free-run simulation on a test realisation (fig. 4.6)",
+    "fig4_6_simulation.png": "Free-run simulation of the first test record (fig. 4.6)",
     "fig4_7_simulation_error_statistics.png": (
         "μ_Ns and σ_Ns of simulation errors (fig. 4.7)"
     ),
@@ -247,9 +289,6 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
             ax=axes,
         )
 
-    first = next(iter(models.values())).outputs[0]
-    unit = data.get("units", {}).get(first)
-
     names = list(FIGURES)
     builders = {
         names[1]: lambda: _response_figure(
@@ -258,13 +297,13 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
         names[2]: lambda: _correlation_figure(models, data, evaluation, "acf"),
         names[3]: lambda: _correlation_figure(models, data, evaluation, "ccf"),
         names[4]: lambda: _statistics_figure(
-            evaluation, "prediction", FIGURES[names[4]], unit
+            data, evaluation, "prediction", FIGURES[names[4]]
         ),
         names[5]: lambda: _response_figure(
             models, data, evaluation, "simulation", "Simulation"
         ),
         names[6]: lambda: _statistics_figure(
-            evaluation, "simulation", FIGURES[names[6]], unit
+            data, evaluation, "simulation", FIGURES[names[6]]
         ),
     }
     if "train" in data:

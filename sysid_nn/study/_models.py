@@ -28,7 +28,8 @@ class StudyModel:
     inputs : tuple of str
         Record fields fed as excitation columns.
     outputs : tuple of str
-        Record fields modelled; the first one is scored.
+        Record fields modelled; the first one is scored by the study
+        (:func:`run_validation` scores every one).
     step : int, default=1
         The model sees every ``step``-th sample.
 

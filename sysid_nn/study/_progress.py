@@ -1,11 +1,13 @@
-"""Progress bars of the study's long steps (stderr, off by default)."""
+"""Progress of the study's long steps (stderr, off by default).
+
+The study uses only public names of the package, with this one exception:
+progress display (``sysid_nn._progress``) is shared with the estimators'
+training progress, so that a terminal gets bars and a log or pipe gets plain
+lines, decided in one place. It is display only, no estimator API.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from sysid_nn._progress import track as _progress
 
-
-def _progress(items: Iterable, total: int, desc: str, show: bool) -> Iterator:
-    from tqdm.auto import tqdm
-
-    return iter(tqdm(items, total=total, desc=desc, disable=not show, leave=False))
+__all__ = ["_progress"]

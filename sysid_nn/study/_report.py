@@ -44,15 +44,38 @@ def _percent(rate: float) -> str:
     return f"{100 * rate:.0f} %"
 
 
-def _glance(summary: pd.DataFrame) -> pd.DataFrame:
-    """Rows = models, columns = the numbers a reader compares with the paper."""
-    by = summary.set_index(["model", "mode"])
-    linear = by["nrmse_median"].get(("linear", "simulation"))
+def _several(summary: pd.DataFrame) -> bool:
+    """Whether the tables need an output column (more than one output scored)."""
+    return summary["output"].nunique() > 1
+
+
+def _who(row: Any, labels: Mapping[str, str], several: bool) -> str:
+    """A summary row's model, and its output when several are scored."""
+    return (
+        f"{row.label} ({labels.get(row.output, row.output)})" if several else row.label
+    )
+
+
+def _glance(
+    summary: pd.DataFrame, labels: Mapping[str, str] | None = None
+) -> pd.DataFrame:
+    """Rows = models (and outputs), columns = what a reader compares with the paper."""
+    labels = labels or {}
+    several = _several(summary)
+    by = summary.set_index(["model", "output", "mode"])
     rows = []
-    for name in dict.fromkeys(summary["model"]):
-        p, s = by.loc[(name, "prediction")], by.loc[(name, "simulation")]
-        row = {
-            "model": p["label"],
+    for name, output in dict.fromkeys(
+        zip(summary["model"], summary["output"], strict=True)
+    ):
+        p, s = (
+            by.loc[(name, output, "prediction")],
+            by.loc[(name, output, "simulation")],
+        )
+        linear = by["nrmse_median"].get(("linear", output, "simulation"))
+        row = {"model": p["label"]}
+        if several:
+            row["output"] = labels.get(output, output)
+        row |= {
             "NRMSE pred. (median)": p["nrmse_median"],
             "NRMSE sim. (median)": s["nrmse_median"],
         }
@@ -73,9 +96,13 @@ def _glance(summary: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _mode_table(summary: pd.DataFrame, mode: str) -> pd.DataFrame:
-    cols = {
-        "label": "model",
+def _mode_table(
+    summary: pd.DataFrame, mode: str, labels: Mapping[str, str] | None = None
+) -> pd.DataFrame:
+    cols = {"label": "model"}
+    if _several(summary):
+        cols["output"] = "output"
+    cols |= {
         "n_realizations": "N_s",
         "nrmse_median": "NRMSE median",
         "nrmse_mean": "NRMSE mean",
@@ -87,6 +114,8 @@ def _mode_table(summary: pd.DataFrame, mode: str) -> pd.DataFrame:
         "cross_negative_pass_rate": "cross τ<0 passed",
     }
     frame = summary.query("mode == @mode")[list(cols)].rename(columns=cols)
+    if "output" in frame:
+        frame["output"] = frame["output"].map(lambda f: (labels or {}).get(f, f))
     for c in ("whiteness passed", "cross τ>0 passed", "cross τ<0 passed"):
         frame[c] = frame[c].map(_percent)
     return frame
@@ -129,14 +158,19 @@ _PITFALLS = (
 _PAPER = ("tdl_paper", "issm_paper")
 
 
-def _verdicts(summary: pd.DataFrame) -> list[str]:
+def _verdicts(
+    summary: pd.DataFrame,
+    labels: Mapping[str, str] | None = None,
+    records: str = "test realisations",
+) -> list[str]:
     """Plain statements, from the computed results, that a reader must not miss.
 
     Whether the paper's networks simulate unseen realisations (median free-run
     NRMSE at most 1, i.e. better than the displacement's mean) and which
     models' one-step residuals pass the whiteness test.
     """
-    by = summary.set_index(["model", "mode"])
+    # The paper's networks are judged on the paper's output, the displacement.
+    by = summary.query("output == 'displacement'").set_index(["model", "mode"])
     lines = []
     paper = [m for m in _PAPER if (m, "simulation") in by.index]
     if paper:
@@ -158,8 +192,10 @@ def _verdicts(summary: pd.DataFrame) -> list[str]:
     pred = summary.query("mode == 'prediction'")
     n = int(pred["n_realizations"].max())
     rates = pred["whiteness_pass_rate"]
+    several = _several(summary)
     listed = ", ".join(
-        f"{r.label} {_percent(r.whiteness_pass_rate)}" for r in pred.itertuples()
+        f"{_who(r, labels or {}, several)} {_percent(r.whiteness_pass_rate)}"
+        for r in pred.itertuples()
     )
     if rates.max() == 0:
         head = "No model's one-step residuals pass the whiteness test"
@@ -169,7 +205,7 @@ def _verdicts(summary: pd.DataFrame) -> list[str]:
         )
     else:
         head = "Some models' one-step residuals pass the whiteness test"
-    text = f"**{head}** (share of the {n} test realisations: {listed})"
+    text = f"**{head}** (share of the {n} {records}: {listed})"
     if paper and rates.max() < 0.5:
         text += (
             ", unlike the paper's figs 4.3-4.4, where the prediction errors of "
@@ -181,14 +217,20 @@ def _verdicts(summary: pd.DataFrame) -> list[str]:
     return lines
 
 
-def _findings(summary: pd.DataFrame) -> list[str]:
-    sim = summary.query("mode == 'simulation'").set_index("model")
+def _findings(summary: pd.DataFrame, labels: Mapping[str, str]) -> list[str]:
     lines = []
-    best = sim["nrmse_median"].idxmin()
-    lines.append(
-        f"Best simulator on unseen realisations: {sim.loc[best, 'label']} "
-        f"(median free-run NRMSE {_fmt(sim.loc[best, 'nrmse_median'])})."
-    )
+    if summary["model"].nunique() > 1:
+        for output, rows in summary.query("mode == 'simulation'").groupby(
+            "output", sort=False
+        ):
+            best = rows.loc[rows["nrmse_median"].idxmin()]
+            of = f" of {labels.get(output, output)}" if _several(summary) else ""
+            lines.append(
+                f"Best simulator{of} on unseen realisations: {best['label']} "
+                f"(median free-run NRMSE {_fmt(best['nrmse_median'])})."
+            )
+    sim = summary.query("mode == 'simulation' and output == 'displacement'")
+    sim = sim.set_index("model")
     if {"tdl_paper", "issm_paper"} <= set(sim.index):
         tdl, issm = sim.loc["tdl_paper", "sigma_Ns"], sim.loc["issm_paper", "sigma_Ns"]
         better = "TDL" if tdl < issm else "ISSM"
@@ -209,6 +251,9 @@ def write_report(
     models: Mapping[str, StudyModel],
     figures: Sequence[str] = (),
     extra: Mapping[str, Sequence[str]] | None = None,
+    output_labels: Mapping[str, str] | None = None,
+    alpha: float = 0.05,
+    records: str = "test realisations",
 ) -> None:
     """Write ``report.md``: verdicts, setup, tables laid out as the paper's figures.
 
@@ -233,6 +278,13 @@ def write_report(
         Figure file names present next to the report (keys of ``FIGURES``).
     extra : dict of str to sequence of str, optional
         Further sections, heading to lines.
+    output_labels : dict of str to str, optional
+        How the scored outputs (``summary["output"]``) are named, e.g.
+        ``{"x": "x [m]"}``; default their field names.
+    alpha : float, default=0.05
+        Significance level of the residual tests in ``summary``.
+    records : str, default="test realisations"
+        What the evaluated records are called in the text.
 
     Examples
     --------
@@ -269,15 +321,25 @@ def write_report(
         )
     lines = [f"# {title}", ""]
     lines += ["## Results at a glance", ""]
-    lines += [f"- {line}" for line in _verdicts(summary)] + [""]
-    lines += [_md_table(_glance(summary)), ""]
+    labels = dict(output_labels or {})
+    named = [labels.get(f, f) for f in dict.fromkeys(summary["output"])]
+    glance = _glance(summary, labels)
+    lines += [f"- {line}" for line in _verdicts(summary, labels, records)] + [""]
+    lines += [_md_table(glance), ""]
+    whose = "its" if len(named) == 1 else "each output's"
+    units = f"the units of the {named[0]}" if len(named) == 1 else "each output's units"
     lines += [
-        "NRMSE: root-mean-square error of the displacement over its standard "
-        "deviation (0 perfect, 1 no better than its mean); `sim. / linear`: "
-        "median free-run NRMSE relative to the linear baseline. μ_Ns and σ_Ns "
-        "(eq. 19-20) are in the displacement's units, averaged over the N_s "
-        "test realisations as in figs 4.5 and 4.7. Residual tests at the 95 % "
-        "level on every realisation (figs 4.3-4.4).",
+        f"NRMSE: root-mean-square error of the {' and '.join(named)} over "
+        f"{whose} standard deviation "
+        "(0 perfect, 1 no better than its mean)"
+        + (
+            "; `sim. / linear`: median free-run NRMSE relative to the linear baseline"
+            if "sim. / linear" in glance
+            else ""
+        )
+        + f". μ_Ns and σ_Ns (eq. 19-20) are in {units}, averaged over the "
+        f"N_s {records} as in figs 4.5 and 4.7. Residual tests at the "
+        f"{100 * (1 - alpha):g} % level on each of the {records} (figs 4.3-4.4).",
         "",
     ]
     if "issm_paper" in models or "tdl_paper" in models:
@@ -289,7 +351,7 @@ def write_report(
             "tests (figs 4.3-4.4).",
             "",
         ]
-    lines += [f"- {line}" for line in _findings(summary)] + [""]
+    lines += [f"- {line}" for line in _findings(summary, labels)] + [""]
     lines += ["## Setup", ""] + [f"- {line}" for line in setup] + [""]
     first = next(iter(FIGURES))
     if first in has:
@@ -299,7 +361,8 @@ def write_report(
         ("One-step prediction (section 4.3)", "prediction", [1, 2, 3, 4]),
         ("Free-run simulation (section 4.4)", "simulation", [5, 6]),
     ):
-        lines += [f"## {heading}", "", _md_table(_mode_table(summary, mode)), ""]
+        table = _mode_table(summary, mode, labels)
+        lines += [f"## {heading}", "", _md_table(table), ""]
         for i in figs:
             name = list(FIGURES)[i]
             if name in has:
@@ -314,8 +377,10 @@ def write_report(
     for heading, body in (extra or {}).items():
         lines += [f"## {heading}", "", *body, ""]
     lines += ["## Files", ""]
-    lines += ["- `results.csv`: one row per realisation, model and mode."]
-    lines += ["- `summary.csv`: one row per model and mode (the tables above)."]
+    lines += ["- `results.csv`: one row per record, model, scored output and mode."]
+    lines += [
+        "- `summary.csv`: one row per model, scored output and mode (the tables)."
+    ]
     lines += [f"- `{name}`: {FIGURES[name]}" for name in figures]
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
 

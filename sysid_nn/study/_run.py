@@ -19,7 +19,7 @@ from sklearn.utils import Bunch
 
 from sysid_nn.study._config import StudyConfig
 from sysid_nn.study._data import generate_data
-from sysid_nn.study._figures import _figures, hysteresis_loops
+from sysid_nn.study._figures import _figures, _label, hysteresis_loops
 from sysid_nn.study._models import StudyModel, fit_models
 from sysid_nn.study._progress import _progress
 from sysid_nn.study._report import (
@@ -105,6 +105,10 @@ def _write_outputs(
     for name, build in _progress(builders.items(), len(builders), "figures", progress):
         build().savefig(tmp / name, dpi=90)
     return summary, list(builders)
+
+
+def _output_labels(data: Bunch, evaluation: Bunch) -> dict[str, str]:
+    return {field: _label(data, field) for field in evaluation.outputs}
 
 
 def run_study(
@@ -195,6 +199,8 @@ def run_study(
             models=models,
             figures=figures,
             extra={"Hysteresis": _hysteresis_lines(loops)},
+            output_labels=_output_labels(data, evaluation),
+            alpha=config.alpha,
         )
     return Bunch(
         out_dir=Path(out_dir),
@@ -225,7 +231,9 @@ def run_validation(
 
     Prediction and simulation of every record, residual tests, eq. 19-20
     statistics, figs 4.2-4.7 and ``report.md``, written like
-    :func:`run_study` (staged, then moved in place).
+    :func:`run_study` (staged, then moved in place). Every output of the
+    model is scored, tabulated and drawn under its field name (with its unit
+    when ``units`` gives one).
 
     Parameters
     ----------
@@ -284,9 +292,13 @@ def run_validation(
         paper_tdl_step=model.step,
     )
     models = {"model": model}
-    data = Bunch(test=records, dt=float(dt), units=dict(units or {}))
+    data = Bunch(
+        test=records, dt=float(dt), units=dict(units or {}), record_name="record"
+    )
     with _staged_directory(out_dir, overwrite) as tmp:
-        evaluation = evaluate(models, data, config, progress=progress)
+        evaluation = evaluate(
+            models, data, config, outputs=model.outputs, progress=progress
+        )
         summary, figures = _write_outputs(tmp, models, data, evaluation, None, progress)
         n = summary["n_realizations"].iloc[0]
         write_report(
@@ -302,6 +314,9 @@ def run_validation(
             ],
             models=models,
             figures=figures,
+            output_labels=_output_labels(data, evaluation),
+            alpha=alpha,
+            records="records",
         )
     return Bunch(
         out_dir=Path(out_dir),
