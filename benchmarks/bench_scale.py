@@ -130,10 +130,10 @@ def _instrument(est, log: list):
     est._fit_one_serial = fit_one_logged
     for name, solve in list(_base._SOLVERS.items()):
 
-        def logged(objective, w, iters, tol, tracker, solve=solve):
+        def logged(objective, w, iters, tol, tracker, stall=None, solve=solve):
             before = dict(clock)
             start = time.perf_counter()
-            out = solve(objective, w, iters, tol, tracker)
+            out = solve(objective, w, iters, tol, tracker, stall)
             entry = {k: clock[k] - before[k] for k in clock}
             entry.update(
                 restart=restart["k"],

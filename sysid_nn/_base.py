@@ -47,6 +47,11 @@ _DIVERGENCE_FACTOR = 100.0
 _ONE_STEP_SHARE = 2.0 / 3.0
 _SHOOTING_SHARE = 4.0 / 15.0
 _FREE_RUN = np.iinfo(np.int64).max // 4
+#: The stages before the last end when Levenberg-Marquardt's cost stalls over
+#: this many accepted steps (see ``sysid_nn._solvers._solve_lm``): the
+#: shooting stages otherwise spend their whole budget on gains the next stage
+#: does not need.
+_STALL_STEPS = 10
 #: ``fit`` warns when the estimated output noise makes up more than this share
 #: of the spread of the outputs' second difference. Measured on the oscillator
 #: at 100 samples per period: at a share of 0.05 (0.01 % noise) the TDL lost
@@ -740,7 +745,10 @@ class _RecurrentRegressorBase(BaseEstimator):
             objective = _Objective(self, train, seg, mask, n_res)
             if not np.isfinite(objective.loss(w)):
                 continue  # the stage diverges from here on: skip it
-            w, nit, ok = _SOLVERS[self.solver](objective, w, iters, self.tol, tracker)
+            stall = None if last else _STALL_STEPS
+            w, nit, ok = _SOLVERS[self.solver](
+                objective, w, iters, self.tol, tracker, stall
+            )
             n_iter += nit
             if last:
                 converged = ok or tracker.stopped

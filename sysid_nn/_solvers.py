@@ -1,8 +1,10 @@
 """Least-squares objective of a training stage and the solvers that minimise it.
 
-A solver is called as ``solver(objective, w, iters, tol, tracker)`` and
+A solver is called as ``solver(objective, w, iters, tol, tracker, stall)`` and
 returns ``(w, n_evaluations, converged)``; ``tracker(w)`` sees the weights
-after every accepted step and may raise :class:`_EarlyStop`.
+after every accepted step and may raise :class:`_EarlyStop`. With ``stall``
+set, Levenberg-Marquardt also ends the stage once its cost fell by less than
+``_STALL_IMPROVEMENT`` (relative) over the last ``stall`` accepted steps.
 
 Levenberg-Marquardt works on the Gauss-Newton normal equations ``J'J`` and
 ``J'r``, which the kernels accumulate while the recurrence runs: its memory
@@ -20,6 +22,11 @@ from scipy.optimize import minimize
 
 if TYPE_CHECKING:  # pragma: no cover
     from sysid_nn._base import _Data
+
+
+#: Relative fall of a stage's cost over its last ``stall`` accepted steps
+#: below which Levenberg-Marquardt ends the stage (see ``_solve_lm``).
+_STALL_IMPROVEMENT = 1e-3
 
 
 class _EarlyStop(Exception):
@@ -123,7 +130,7 @@ class _Objective:
         return loss, grad
 
 
-def _solve_lm(objective, w, iters, tol, tracker):
+def _solve_lm(objective, w, iters, tol, tracker, stall=None):
     """Levenberg-Marquardt with the exact recurrent Jacobian.
 
     Marquardt's scale-invariant damping ``mu * diag(J'J)`` and Nielsen's
@@ -132,7 +139,12 @@ def _solve_lm(objective, w, iters, tol, tracker):
     of the SVD a general trust-region solver takes, and ``objective`` forms
     them without holding ``J``. A step whose run diverges has infinite cost
     and is rejected like any other bad step. The tracker sees the weights
-    after every accepted step. Returns ``(w, n_evaluations, converged)``.
+    after every accepted step. With ``stall`` set, the stage ends (converged)
+    once the cost fell by less than ``_STALL_IMPROVEMENT`` of itself over the
+    last ``stall`` accepted steps. The step-norm test ends a stage
+    only after an accepted step: where ``J'J`` is huge the first undamped
+    step can be below ``tol * |w|`` although the cost still falls along it.
+    Returns ``(w, n_evaluations, converged)``.
     """
     r = objective.residuals(w)
     cost = 0.5 * float(r @ r)
@@ -140,6 +152,7 @@ def _solve_lm(objective, w, iters, tol, tracker):
     mu, nu = 1e-3, 2.0
     tracker.stopped = False
     n_eval = 0
+    costs = [cost]  # after each accepted step
     try:
         while n_eval < iters:
             if np.max(np.abs(g)) <= tol * max(1.0, cost):
@@ -151,7 +164,9 @@ def _solve_lm(objective, w, iters, tol, tracker):
                 mu, nu = mu * nu, nu * 2.0
                 n_eval += 1
                 continue
-            if np.linalg.norm(step) <= tol * (np.linalg.norm(w) + tol):
+            if len(costs) > 1 and np.linalg.norm(step) <= tol * (
+                np.linalg.norm(w) + tol
+            ):
                 return w, n_eval, True
             w_new = w + step
             r_new = objective.residuals(w_new)
@@ -165,10 +180,11 @@ def _solve_lm(objective, w, iters, tol, tracker):
                 small = cost - cost_new <= tol * cost
                 w, r, cost = w_new, r_new, cost_new
                 A, g = objective.normal_equations(w)
+                costs.append(cost)
                 tracker(w)
                 mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
                 nu = 2.0
-                if small:
+                if small or _stalled(costs, stall):
                     return w, n_eval, True
             else:
                 mu, nu = mu * nu, nu * 2.0
@@ -177,8 +193,17 @@ def _solve_lm(objective, w, iters, tol, tracker):
     return w, n_eval, False
 
 
+def _stalled(costs, stall):
+    """Whether the cost fell by less than its share over ``stall`` steps."""
+    if stall is None or len(costs) <= stall:
+        return False
+    before = costs[-1 - stall]
+    return before - costs[-1] <= _STALL_IMPROVEMENT * before
+
+
 def _solve_minimize(method):
-    def solve(objective, w, iters, tol, tracker):
+    # ``stall`` is a Levenberg-Marquardt rule; these solvers stop by ``tol``.
+    def solve(objective, w, iters, tol, tracker, stall=None):
         count = {"n": 0, "x": w}
 
         def callback(xk):

@@ -12,7 +12,7 @@ from scipy.signal import lfilter
 from sysid_nn import ISSMRegressor, TDLRegressor
 from sysid_nn._base import _FREE_RUN
 from sysid_nn._issm import _Restricted
-from sysid_nn._solvers import _Objective, _solve_lm
+from sysid_nn._solvers import _STALL_IMPROVEMENT, _Objective, _solve_lm
 
 
 def _fitted(kind, n_outputs=1, length=300, n_seq=2, **params):
@@ -104,6 +104,63 @@ def test_lm_iterates_equal_those_of_the_full_jacobian(kind, seg):
     for a, b in zip(steps_full[:3], steps_acc[:3], strict=True):
         assert np.abs(a - b).max() <= 1e-9 * np.abs(a - w).max()
     assert np.isclose(end_acc[2], end_full[2], rtol=1e-8)
+
+
+class _Explicit:
+    """Least-squares objective given by its residual and Jacobian functions."""
+
+    def __init__(self, residuals, jacobian):
+        self.residuals, self._jacobian = residuals, jacobian
+
+    def normal_equations(self, w):
+        J = self._jacobian(w)
+        return J.T @ J, J.T @ self.residuals(w)
+
+
+def test_step_test_does_not_end_a_stage_before_an_accepted_step():
+    # Steep linear residuals: J'J is 1e12, the gradient far above tol, but the
+    # exact Gauss-Newton step is below tol * |w|. The stage must take it
+    # rather than end at iteration 0.
+    J0 = 1e6 * np.eye(3)
+    target = np.array([1.0, 2.0, 3.0]) + 1e-9
+    objective = _Explicit(lambda w: J0 @ (w - target), lambda w: J0)
+    w0 = np.array([1.0, 2.0, 3.0])
+    tracker = _Recorder()
+    w, n_eval, converged = _solve_lm(objective, w0, 20, 1e-8, tracker)
+    assert n_eval >= 1 and len(tracker.iterates) >= 1
+    np.testing.assert_allclose(w, target, rtol=0, atol=1e-12)
+    r0, r1 = objective.residuals(w0), objective.residuals(w)
+    assert r1 @ r1 < 1e-3 * (r0 @ r0)
+    assert converged
+
+
+def test_stage_ends_when_its_cost_stalls():
+    # r = (w^2, 1): the cost falls towards 0.5 by ever smaller amounts, long
+    # after its relative fall over three steps is below _STALL_IMPROVEMENT.
+    objective = _Explicit(
+        lambda w: np.array([w[0] ** 2, 1.0]),
+        lambda w: np.array([[2.0 * w[0]], [0.0]]),
+    )
+    runs = {}
+    for stall in (None, 3):
+        tracker = _Recorder()
+        _, _, converged = _solve_lm(
+            objective, np.array([1.0]), 200, 1e-14, tracker, stall
+        )
+        costs = [
+            0.5 * float(objective.residuals(v) @ objective.residuals(v))
+            for v in tracker.iterates
+        ]
+        runs[stall] = (costs, converged)
+    plain, stalled = runs[None][0], runs[3][0]
+    assert runs[3][1] and runs[None][1]
+    assert len(stalled) < len(plain)
+    # It stops at the first step whose fall over the last three is too small.
+    start = 0.5 * (1.0 + 1.0)
+    costs = [start, *stalled]
+    falls = [(costs[k - 3] - costs[k]) / costs[k - 3] for k in range(3, len(costs))]
+    assert falls[-1] <= _STALL_IMPROVEMENT
+    assert all(f > _STALL_IMPROVEMENT for f in falls[:-1])
 
 
 def test_restricted_normal_equations_are_those_of_the_subset():

@@ -553,8 +553,8 @@ def test_last_stage_gets_its_own_patience():
 
         solve = _base._SOLVERS["lm"]
 
-        def counting(objective, w, iters, tol, tracker):
-            out = solve(objective, w, iters, tol, tracker)
+        def counting(objective, w, iters, tol, tracker, stall=None):
+            out = solve(objective, w, iters, tol, tracker, stall)
             stages.append((objective.seg, out[1], tracker.stopped))
             return out
 
@@ -570,6 +570,26 @@ def test_last_stage_gets_its_own_patience():
     assert seg == _FREE_RUN
     # Either it converged or it ran at least its patience before stopping.
     assert n_eval >= model.n_iter_no_change or not stopped
+
+
+def test_stages_before_the_last_stop_when_their_cost_stalls(monkeypatch):
+    # Every stage but the free run gets the stall rule; the free run stops
+    # by tol, its budget or the validation patience alone.
+    from sysid_nn import _base
+
+    Xs, ys = _records(n=3, length=300, seed=5)
+    solve = _base._SOLVERS["lm"]
+    stages = []
+
+    def spying(objective, w, iters, tol, tracker, stall=None):
+        out = solve(objective, w, iters, tol, tracker, stall)
+        stages.append((objective.seg, stall, out[1], iters))
+        return out
+
+    monkeypatch.setitem(_base._SOLVERS, "lm", spying)
+    _small(hidden_layer_sizes=(4,), max_iter=60, n_init=1).fit(Xs, ys)
+    assert [s[1] for s in stages[:-1]] == [_base._STALL_STEPS] * (len(stages) - 1)
+    assert stages[-1][0] == _FREE_RUN and stages[-1][1] is None
 
 
 def test_simulation_continues_from_measured_history():
