@@ -96,9 +96,14 @@ print(report.summary[["test", "p_value", "passed"]].to_string(index=False))
 
 fig, ax = plt.subplots(figsize=(7, 3.5))
 plot_response(
-    frames[3]["time_s"], y_new, y_sim, label="free run", title="Test 4", ax=ax
+    frames[3]["time_s"],
+    y_new,
+    y_sim,
+    label="free run",
+    ylabel="displacement [mm]",
+    title="Test 4",
+    ax=ax,
 )
-ax.set_ylabel("displacement [mm]")
 fig.tight_layout()
 plt.show()
 

@@ -106,9 +106,13 @@ fig.tight_layout()
 # not measured: the networks must reconstruct its effect from the measured
 # displacement (and, for the ISSM, velocity).
 g = osc.alpha * rec.displacement[j] + (1 - osc.alpha) * rec.hysteretic[j]
-ax = plot_hysteresis(rec.displacement[j], g, ylabel="restoring term g(X, Z) [m]")
-ax.set_xlabel("displacement X(t) [m]")
-ax.set_title("Hysteresis loop (eq. 14-15)")
+ax = plot_hysteresis(
+    rec.displacement[j],
+    g,
+    xlabel="displacement X(t) [m]",
+    ylabel="restoring term g(X, Z) [m]",
+    title="Hysteresis loop (eq. 14-15)",
+)
 ax.figure.tight_layout()
 
 plt.show()

@@ -138,6 +138,7 @@ plot_response(
     rec.t,
     y_test[j],
     {"network (free run)": y_sim[j], "linear (free run)": linear.simulate(X_test[j])},
+    ylabel="displacement X [m]",
     title=f"Test record {3 + j}: free-run simulation",
     ax=ax,
 )

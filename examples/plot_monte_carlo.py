@@ -108,21 +108,24 @@ print(summary[columns].to_string(index=False, float_format=lambda v: f"{v:.3g}")
 # Figures 4.5 and 4.7
 # -------------------
 # :func:`~sysid_nn.plotting.plot_error_statistics` draws the bars of the
-# paper from ``{model: ErrorStatistics}``. A model whose statistics are NaN
-# (a divergent realisation) has no bar.
+# paper from ``{model: ErrorStatistics}``, each labelled with its value; when
+# the bars differ by orders of magnitude (one-step errors here), the axis is
+# logarithmic in both directions. A model whose statistics are NaN (a
+# divergent realisation) has no bar.
 fig, (ax_pred, ax_sim) = plt.subplots(1, 2, figsize=(10, 4))
 plot_error_statistics(
     evaluation.statistics["prediction"],
+    unit="m",
     title="One-step prediction errors (fig. 4.5)",
     ax=ax_pred,
 )
 plot_error_statistics(
     evaluation.statistics["simulation"],
+    unit="m",
     title="Simulation errors (fig. 4.7)",
     ax=ax_sim,
 )
 for ax in (ax_pred, ax_sim):
-    ax.set_ylabel("displacement error [m]")
     ax.tick_params(axis="x", labelrotation=30)
 fig.tight_layout()
 

@@ -92,6 +92,7 @@ plot_response(
     rec.t,
     y_j,
     {"one-step prediction": y_pred, "free-run simulation": y_sim},
+    ylabel="displacement X [m]",
     title="A test record: prediction and simulation",
     ax=ax_y,
 )

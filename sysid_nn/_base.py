@@ -11,6 +11,7 @@ its kernels, the initial parameters, and the kernels themselves.
 
 from __future__ import annotations
 
+import functools
 import inspect
 import numbers
 import textwrap
@@ -28,9 +29,12 @@ from sklearn.base import BaseEstimator
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
-from sklearn.utils.validation import check_is_fitted
+from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
+from sysid_nn import _uncertainty
+from sysid_nn._progress import report_stage
 from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
+from sysid_nn._validation import check_same_width
 
 __all__ = ["DivergenceWarning"]
 
@@ -199,6 +203,29 @@ def _as_sequence_list(X, name: str):
     return [X], False
 
 
+@contextmanager
+def _naming_sequence(where: str, as_list: bool):
+    """Prefix an error about one sequence of a list with its place, ``X[i]``."""
+    try:
+        yield
+    except ValueError as exc:
+        if as_list:
+            raise ValueError(f"{where}: {exc}") from exc
+        raise
+
+
+def _float_array(a, name: str, where: str, as_list: bool) -> np.ndarray:
+    """``a`` as a float64 array of any dimension; errors name the sequence."""
+    with _naming_sequence(where, as_list):
+        return check_array(
+            a,
+            dtype=np.float64,
+            ensure_2d=False,
+            ensure_all_finite=False,
+            input_name=name,
+        )
+
+
 def _check_finite(a: np.ndarray, name: str, index: int | None, as_list: bool) -> None:
     bad = ~np.isfinite(a)
     if bad.any():
@@ -215,7 +242,10 @@ class _RecurrentRegressorBase(BaseEstimator):
     """Base class of the recurrent-network regressors (not public)."""
 
     _parameter_constraints: dict = {
-        "hidden_layer_sizes": ["array-like"],
+        "hidden_layer_sizes": [
+            "array-like",
+            Interval(numbers.Integral, 1, None, closed="left"),
+        ],
         "activation": [StrOptions({"logistic", "tanh"})],
         "input_delay": [Interval(numbers.Integral, 0, None, closed="left")],
         "focus": [StrOptions({"prediction", "simulation"})],
@@ -328,27 +358,25 @@ class _RecurrentRegressorBase(BaseEstimator):
                 )
         Xs, ys, y_1d = [], [], None
         for i, Xi in enumerate(X_list):
-            if hasattr(Xi, "columns") and reset and i == 0:
-                self.feature_names_in_ = np.asarray(Xi.columns, dtype=object)
-            try:
-                Xi = check_array(
-                    Xi, dtype=np.float64, ensure_all_finite=False, input_name="X"
+            where = f"X[{i}]" if as_list else "X"
+            arr = _float_array(Xi, "X", where, as_list)
+            if arr.ndim == 1:
+                # scikit-learn's message prints the whole array and suggests
+                # reshape(1, -1), which would make a record one time step.
+                raise ValueError(
+                    f"{where} must be 2-D (n_samples, n_inputs); got a 1-D array of "
+                    f"shape {arr.shape}. Reshape your data: a single input is "
+                    f"one column, {where}.reshape(-1, 1)."
                 )
-            except ValueError as exc:
-                if as_list:
-                    raise ValueError(f"X[{i}]: {exc}") from exc
-                raise
+            # Names as scikit-learn checks them: the first sequence of a fit
+            # sets them, every other sequence must match.
+            with _naming_sequence(where, as_list):
+                _check_feature_names(self, Xi, reset=reset and i == 0)
+            Xi = arr
             _check_finite(Xi, "X", i, as_list)
             Xs.append(Xi)
             if y is not None:
-                yi = y_list[i]
-                yi = check_array(
-                    yi,
-                    dtype=np.float64,
-                    ensure_2d=False,
-                    ensure_all_finite=False,
-                    input_name="y",
-                )
+                yi = _float_array(y_list[i], "y", f"y[{i}]", as_list)
                 if yi.ndim not in (1, 2):
                     raise ValueError(
                         f"y must be 1-D (n_samples,) or 2-D (n_samples, n_outputs); "
@@ -366,35 +394,38 @@ class _RecurrentRegressorBase(BaseEstimator):
                         f"{len(Xi)} and {len(yi)}."
                     )
                 ys.append(yi)
-        n_features = {Xi.shape[1] for Xi in Xs}
-        if len(n_features) > 1:
-            raise ValueError(
-                f"All sequences of X must have the same number of features; got "
-                f"{sorted(n_features)}."
-            )
-        n_features = n_features.pop()
+        n_features = check_same_width(Xs, "X", "features")
         if reset:
             self.n_features_in_ = n_features
-            if not hasattr(X_list[0], "columns") and hasattr(self, "feature_names_in_"):
-                del self.feature_names_in_
         elif n_features != self.n_features_in_:
             raise ValueError(
                 f"X has {n_features} features, but {name} is expecting "
                 f"{self.n_features_in_} features as input."
             )
         if ys:
-            n_outputs = {yi.shape[1] for yi in ys}
-            if len(n_outputs) > 1:
+            n_outputs = check_same_width(ys, "y", "outputs")
+            if not reset and n_outputs != self.n_outputs_:
                 raise ValueError(
-                    f"All sequences of y must have the same number of outputs; got "
-                    f"{sorted(n_outputs)}."
-                )
-            if not reset and ys[0].shape[1] != self.n_outputs_:
-                raise ValueError(
-                    f"y has {ys[0].shape[1]} outputs, but {name} was fitted with "
+                    f"y has {n_outputs} outputs, but {name} was fitted with "
                     f"{self.n_outputs_}."
                 )
         return Xs, (ys if y is not None else None), as_list, bool(y_1d)
+
+    def _lag_reach(self) -> int:
+        """Past samples read to model one sample, the starting fit's included.
+
+        A structure whose linear start looks further back than its own
+        recurrence overrides this.
+        """
+        return self._history_length()
+
+    def _min_samples(self) -> int:
+        """Shortest sequence ``fit`` accepts: the lag reach and one to model.
+
+        Every fitted equation needs its whole reach inside the record; a
+        shorter record leaves the starting fit without data.
+        """
+        return self._lag_reach() + 1
 
     def _check_lengths(self, Xs, min_length: int, what: str = "X") -> None:
         for i, Xi in enumerate(Xs):
@@ -403,7 +434,9 @@ class _RecurrentRegressorBase(BaseEstimator):
                 raise ValueError(
                     f"{seq} has {len(Xi)} sample{'s' if len(Xi) != 1 else ''}; "
                     f"{type(self).__name__} needs at least {min_length} samples "
-                    "per sequence with these lags. Use longer records or fewer lags."
+                    f"per sequence: with these settings it reads {min_length - 1} "
+                    "past samples to model one. Use longer records or a smaller "
+                    "structure (fewer lags or states, a shorter input_delay)."
                 )
 
     # ------------------------------------------------------------ scaling
@@ -476,10 +509,12 @@ class _RecurrentRegressorBase(BaseEstimator):
                 "X_val and y_val must be given together; got only "
                 f"{'X_val' if X_val is not None else 'y_val'}."
             )
-        min_len = self._history_length() + 1
+        min_len = self._min_samples()
         skip = 0
         if X_val is not None:
             Xv, yv, _, _ = self._validate_Xy(X_val, y_val, reset=False, y_required=True)
+            _mean_scale(np.concatenate(Xv), "X_val")
+            _mean_scale(np.concatenate(yv), "y_val")
         elif self.early_stopping:
             Xs, ys, Xv, yv, skip = self._split_validation(Xs, ys, min_len)
         else:
@@ -489,8 +524,8 @@ class _RecurrentRegressorBase(BaseEstimator):
             self._check_lengths(Xv, min_len, "X_val")
 
         Xc, yc = np.concatenate(Xs), np.concatenate(ys)
-        self._x_mean, self._x_scale = _mean_scale(Xc)
-        self._y_mean, self._y_scale = _mean_scale(yc)
+        self._x_mean, self._x_scale = _mean_scale(Xc, "X")
+        self._y_mean, self._y_scale = _mean_scale(yc, "y")
         train = self._stack(Xs, ys)
         val = self._stack(Xv, yv) if Xv is not None else None
         if val is not None:
@@ -522,6 +557,7 @@ class _RecurrentRegressorBase(BaseEstimator):
             self.restart_scores_ = np.array([-r.score for r in runs])
             self.fit_time_ = time.perf_counter() - start
             self._after_fit(train, val)
+            _uncertainty.fit_covariance(self, train)
         if not chosen.converged:
             warnings.warn(
                 f"{type(self).__name__} stopped after max_iter={self.max_iter} "
@@ -532,12 +568,20 @@ class _RecurrentRegressorBase(BaseEstimator):
             )
         return self
 
+    def _hidden_layers(self) -> tuple:
+        """``hidden_layer_sizes`` as a tuple; an int is one layer (MLPRegressor)."""
+        sizes = self.hidden_layer_sizes
+        return tuple(sizes) if np.iterable(sizes) else (sizes,)
+
     def _validate_structure_params(self) -> None:
-        sizes = tuple(self.hidden_layer_sizes)
-        if not all(isinstance(n, numbers.Integral) and n > 0 for n in sizes):
+        if not all(
+            isinstance(n, numbers.Integral) and not isinstance(n, bool) and n > 0
+            for n in self._hidden_layers()
+        ):
             raise ValueError(
-                "hidden_layer_sizes must be a tuple of positive integers (or () for "
-                f"the linear model); got {self.hidden_layer_sizes!r}."
+                "hidden_layer_sizes must be a positive integer (one hidden layer) "
+                "or a tuple of positive integers (or () for the linear model); bools "
+                f"are not sizes. Got {self.hidden_layer_sizes!r}."
             )
         segs = tuple(self.shooting_segments)
         if not all(isinstance(n, numbers.Integral) and n > 1 for n in segs):
@@ -621,13 +665,15 @@ class _RecurrentRegressorBase(BaseEstimator):
             n_iter += nit
             if last:
                 converged = ok or tracker.stopped
-            if self.verbose:
-                print(
-                    f"[{type(self).__name__}] restart {k} stage {i_stage} "
-                    f"(segment {'free run' if seg == _FREE_RUN else seg}): "
-                    f"{nit} iterations, loss {objective.loss(w):.3e}, "
-                    f"validation {tracker.best_loss:.3e}"
-                )
+            report_stage(
+                self,
+                (k, self._n_restarts()),
+                (i_stage, len(stages)),
+                f"segment {'free run' if seg == _FREE_RUN else seg}",
+                nit,
+                functools.partial(objective.loss, w),
+                tracker.best_loss,
+            )
         if val is not None:
             w = tracker.best_w
             val_loss = tracker.best_loss
@@ -645,18 +691,32 @@ class _RecurrentRegressorBase(BaseEstimator):
         )
 
     # ----------------------------------------------------------- predicting
-    def _simulate(self, X, initial, initial_name: str, initial_inputs=None):
+    def _simulate(
+        self,
+        X,
+        initial,
+        initial_name: str,
+        initial_inputs=None,
+        return_std=False,
+        interval="prediction",
+    ):
         check_is_fitted(self, "coefs_")
         Xs, _, as_list, _ = self._validate_Xy(X, reset=False, y_required=False)
         self._check_lengths(Xs, 1)
         initial = self._check_initial(initial, len(Xs), as_list, initial_name)
         past = self._check_initial_inputs(initial_inputs, len(Xs), as_list)
         data = self._stack(Xs, None, initial, past)
-        Yhat, _, diverged, _ = self._run(self.coefs_, data, _FREE_RUN, False)
+        Yhat, J, diverged, _ = self._run(self.coefs_, data, _FREE_RUN, return_std)
         self._warn_divergence(diverged, as_list)
-        return self._unstack(Yhat, data, as_list, self._y_1d)
+        y_sim = self._unstack(Yhat, data, as_list, self._y_1d)
+        if not return_std:
+            return y_sim
+        std = _uncertainty.output_std(
+            self, Yhat, J, data, as_list, self._y_1d, interval
+        )
+        return y_sim, std
 
-    def predict(self, X, y=None, *, horizon=1):
+    def predict(self, X, y=None, *, horizon=1, return_std=False, interval="prediction"):
         """Predict the response, from measured outputs when they are given.
 
         Parameters
@@ -673,24 +733,56 @@ default=None
             what :meth:`score` and scikit-learn's model selection see.
         horizon : int, default=1
             Prediction horizon in samples (only used with ``y``).
+        return_std : bool, default=False
+            Also return the standard deviation of every sample (delta
+            method, see :ref:`uncertainty`); available for the free run and
+            for ``horizon=1``.
+        interval : {"prediction", "confidence"}, default="prediction"
+            What the standard deviation is of (only used with
+            ``return_std``): ``"prediction"``, a new measurement (weight
+            uncertainty plus the residual noise variance of the training
+            records, ``one_step_noise_variance_`` with ``y``,
+            ``noise_variance_`` without); ``"confidence"``, the model output
+            (weight uncertainty only).
 
         Returns
         -------
         y_pred : ndarray or list of ndarray
             Same shape as ``y`` (or as the training targets); a list for a
             list.
+        y_std : ndarray or list of ndarray
+            Standard deviation of each value of ``y_pred``, same shape; only
+            with ``return_std=True``.
         """
-        if y is None:
-            return self._simulate(X, None, "initial")
-        check_is_fitted(self, "coefs_")
-        if not isinstance(horizon, numbers.Integral) or horizon < 1:
+        if (
+            isinstance(horizon, bool)
+            or not isinstance(horizon, numbers.Integral)
+            or horizon < 1
+        ):
             raise ValueError(f"horizon must be a positive integer; got {horizon!r}.")
+        if y is None:
+            return self._simulate(
+                X, None, "initial", return_std=return_std, interval=interval
+            )
+        check_is_fitted(self, "coefs_")
+        if return_std and horizon != 1:
+            raise ValueError(
+                f"return_std=True is available for horizon=1 and for the free run "
+                f"(y=None); got horizon={horizon}."
+            )
         Xs, ys, as_list, y_1d = self._validate_Xy(X, y, reset=False, y_required=True)
         self._check_lengths(Xs, 1)
         data = self._stack(Xs, ys)
         Yhat = self._run_horizon(self.coefs_, data, int(horizon))
         self._mark_out_of_range(Yhat, data, as_list, f"{horizon}-step prediction")
-        return self._unstack(Yhat, data, as_list, y_1d)
+        y_pred = self._unstack(Yhat, data, as_list, y_1d)
+        if not return_std:
+            return y_pred
+        J = self._run(self.coefs_, data, 1, True)[1]
+        std = _uncertainty.output_std(
+            self, Yhat, J, data, as_list, y_1d, interval, one_step=True
+        )
+        return y_pred, std
 
     def score(self, X, y, sample_weight=None):
         """Coefficient of determination R^2 of the free-run simulation.
@@ -801,11 +893,43 @@ default=None
         self._warn_divergence(diverged, as_list, what)
 
 
-def _mean_scale(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    mean = a.mean(axis=0)
-    scale = a.std(axis=0)
-    # Constant channels (relative to their level) are left unscaled.
-    scale[scale < 1e-12 * np.maximum(1.0, np.abs(mean))] = 1.0
+def _mean_scale(a: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and scale of every column, for standardising.
+
+    Computed on the columns divided by a power of two near their peak, which
+    is exact and safe from over- and underflow. A varying column whose
+    squared deviations overflow float64 when summed, or underflow, cannot be
+    standardised (the network and every score would be NaN, or blind to it):
+    both raise a ValueError naming ``name``. A constant column (variance
+    within the rounding error of the mean, the rule of scikit-learn's
+    ``StandardScaler``) is divided by its level where that exceeds 1, so
+    that its rounding noise stays negligible, and left unscaled otherwise.
+    """
+    peak = np.max(np.abs(a), axis=0)
+    # At most the peak, so that it is finite; |a / unit| < 2.
+    unit = np.ldexp(1.0, np.frexp(peak)[1] - 1)
+    rel = a / unit
+    rel_mean, rel_var = rel.mean(axis=0), rel.var(axis=0)
+    n, eps = len(a), np.finfo(np.float64).eps
+    constant = rel_var <= n * eps * rel_var + (n * eps * rel_mean) ** 2
+    with np.errstate(over="ignore", under="ignore"):
+        mean, scale = unit * rel_mean, unit * np.sqrt(rel_var)
+        squares = scale**2
+        overflow = ~constant & ~np.isfinite(n * squares)
+    underflow = ~constant & (squares < np.finfo(np.float64).tiny)
+    for bad, problem in (
+        (overflow, "reaches {:.3g}: its variance overflows float64"),
+        (underflow, "varies by only {:.3g}: float64 cannot square that"),
+    ):
+        if bad.any():
+            j = int(np.flatnonzero(bad)[0])
+            size = peak[j] if bad is overflow else np.ptp(a[:, j])
+            raise ValueError(
+                f"{name} cannot be standardised: column {j} "
+                f"{problem.format(size)}. Rescale {name} (e.g. express it in "
+                "other units) before fitting."
+            )
+    scale[constant] = np.maximum(1.0, peak[constant])
     return mean, scale
 
 

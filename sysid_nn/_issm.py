@@ -24,6 +24,7 @@ from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._solvers import _Objective, _solve_lm
 from sysid_nn._tdl import TDLRegressor
+from sysid_nn._uncertainty import output_std
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]
 
@@ -165,8 +166,9 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     input_delay : int, default=1
         Delay ``n_k`` of the excitation seen by the network; 0 gives direct
         feed-through of ``F(t)``.
-    hidden_layer_sizes : tuple of int, default=(7,)
-        Sizes of the hidden layers; ``()`` gives the linear innovation model.
+    hidden_layer_sizes : int or tuple of int, default=(7,)
+        Sizes of the hidden layers (an int is one layer, as in
+        ``MLPRegressor``); ``()`` gives the linear innovation model.
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_part : bool, default=True
@@ -238,6 +240,20 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         Negative selection loss of every restart.
     fit_time_ : float
         Seconds spent in training.
+    coefs_covariance_ : ndarray of shape (n_coefs, n_coefs)
+        Delta-method covariance of ``coefs_`` (standardised units): from the
+        Jacobian of the final training objective, the innovation weights
+        refitted after a simulation-focused fit from the one-step Jacobian,
+        and with ``init="tdl"`` the TDL network's covariance mapped through
+        the realisation; see :ref:`uncertainty`.
+    n_effective_params_ : float
+        Effective number of weights the data determine (the trace of the
+        hat matrix), used to correct the residual variances.
+    noise_variance_ : ndarray of shape (n_outputs,)
+        Residual variance of the free run on the training records (user's
+        units), corrected for ``n_effective_params_``.
+    one_step_noise_variance_ : ndarray of shape (n_outputs,)
+        The same for the one-step predictor.
     feature_names_in_ : ndarray
         Column names of ``X`` when it was a DataFrame.
 
@@ -321,7 +337,15 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
     score = _RecurrentRegressorBase.score
 
     # -------------------------------------------------------------- public
-    def simulate(self, X, *, initial_state=None, initial_inputs=None):
+    def simulate(
+        self,
+        X,
+        *,
+        initial_state=None,
+        initial_inputs=None,
+        return_std=False,
+        interval="prediction",
+    ):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
         The innovations are zero throughout (``E = 0``).
@@ -341,17 +365,34 @@ such, default=None
             Measured excitation just before the first sample, oldest first
             (1-D for one input). Default: zero excitation before the start.
             Only the last ``input_delay`` rows are used.
+        return_std : bool, default=False
+            Also return the standard deviation of every sample (delta
+            method, see :ref:`uncertainty`).
+        interval : {"prediction", "confidence"}, default="prediction"
+            What the standard deviation is of (only used with
+            ``return_std``): ``"prediction"``, a new measurement (weight
+            uncertainty plus ``noise_variance_``); ``"confidence"``, the
+            model output (weight uncertainty only).
 
         Returns
         -------
         y_sim : ndarray or list of ndarray
             Simulated response; NaN from a sample where the run diverged (a
             :class:`~sysid_nn.DivergenceWarning` says where).
+        y_std : ndarray or list of ndarray
+            Standard deviation of each value of ``y_sim``, same shape; only
+            with ``return_std=True``.
         """
         data, X0, as_list = self._prepare_call(X, None, initial_state, initial_inputs)
-        Yhat, _, diverged, _ = self._run_from(self.coefs_, data, _FREE_RUN, False, X0)
+        Yhat, J, diverged, _ = self._run_from(
+            self.coefs_, data, _FREE_RUN, return_std, X0
+        )
         self._warn_divergence(diverged, as_list, stacklevel=3)
-        return self._unstack(Yhat, data, as_list, self._y_1d)
+        y_sim = self._unstack(Yhat, data, as_list, self._y_1d)
+        if not return_std:
+            return y_sim
+        std = output_std(self, Yhat, J, data, as_list, self._y_1d, interval)
+        return y_sim, std
 
     def predict_states(self, X, y=None, *, initial_state=None) -> Bunch | list[Bunch]:
         """All states and the linearisation of eq. 12 along a trajectory.
@@ -410,6 +451,16 @@ default=None
     def _history_length(self) -> int:
         return max(1, self.input_delay)
 
+    def _arx_lags(self) -> int:
+        """Lags of the ARX fit the linear start is realised from."""
+        return max(_ARX_LAGS, ceil(self.n_states_ / self.n_outputs_))
+
+    def _lag_reach(self) -> int:
+        # The linear start reads further back than the recurrence: the ARX
+        # fit, or the TDL network with _ARX_LAGS lags.
+        lags = _ARX_LAGS if self.init == "tdl" else self._arx_lags()
+        return max(self._history_length(), lags, self.input_delay + lags - 1)
+
     def _validate_outputs(self) -> None:
         p = self.n_outputs_
         if self.init == "tdl":
@@ -427,11 +478,11 @@ default=None
     def _sizes(self) -> np.ndarray:
         n = self.n_states_
         n_z = n + self.n_features_in_ + self.n_outputs_
-        return np.array([n_z, *self.hidden_layer_sizes, n], dtype=np.int64)
+        return np.array([n_z, *self._hidden_layers(), n], dtype=np.int64)
 
     def _bypass(self) -> bool:
         # Without hidden layers the network is the linear part already.
-        return bool(self.linear_part) and len(self.hidden_layer_sizes) > 0
+        return bool(self.linear_part) and len(self._hidden_layers()) > 0
 
     def _history(self, n_seq, initial):
         h = self._history_length()
@@ -512,7 +563,7 @@ default=None
                 f"{n} here ({_ARX_LAGS} x {p} outputs + {_ARX_LAGS - 1} x {m} "
                 f"inputs); got n_states={self.n_states}. Use n_states=None."
             )
-        if not self.linear_part and self.hidden_layer_sizes:
+        if not self.linear_part and self._hidden_layers():
             raise ValueError(
                 'init="tdl" needs linear_part=True: the states holding past '
                 "outputs and inputs are shifted by the linear part."
@@ -653,7 +704,7 @@ default=None
             self._tdl_weights, self.linear_model_ = self._realise_tdl(self.tdl_)
             return
         p, n, nk = self.n_outputs_, self.n_states_, self.input_delay
-        lags = max(_ARX_LAGS, ceil(n / p))
+        lags = self._arx_lags()
         A_i, B_j, c, rows = self._arx(data, lags)
         # Observer-form ARX states along the data: block i is the part of
         # the prediction of y(t + i) already fixed by data up to t - 1, so

@@ -58,8 +58,9 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     input_delay : int, default=1
         Delay ``n_k`` of the newest excitation sample; 0 gives direct
         feed-through of ``F(t)``.
-    hidden_layer_sizes : tuple of int, default=(9,)
-        Sizes of the hidden layers; ``()`` gives the linear model.
+    hidden_layer_sizes : int or tuple of int, default=(9,)
+        Sizes of the hidden layers (an int is one layer, as in
+        ``MLPRegressor``); ``()`` gives the linear model.
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_bypass : bool, default=True
@@ -105,6 +106,17 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         Negative selection loss of every restart.
     fit_time_ : float
         Seconds spent in training.
+    coefs_covariance_ : ndarray of shape (n_coefs, n_coefs)
+        Delta-method covariance of ``coefs_`` (standardised units), from the
+        Jacobian of the final training objective; see :ref:`uncertainty`.
+    n_effective_params_ : float
+        Effective number of weights the data determine (the trace of the
+        hat matrix), used to correct the residual variances.
+    noise_variance_ : ndarray of shape (n_outputs,)
+        Residual variance of the free run on the training records (user's
+        units), corrected for ``n_effective_params_``.
+    one_step_noise_variance_ : ndarray of shape (n_outputs,)
+        The same for the one-step predictor.
     feature_names_in_ : ndarray
         Column names of ``X`` when it was a DataFrame.
 
@@ -187,7 +199,15 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     score = _RecurrentRegressorBase.score
 
     # -------------------------------------------------------------- public
-    def simulate(self, X, *, initial_outputs=None, initial_inputs=None):
+    def simulate(
+        self,
+        X,
+        *,
+        initial_outputs=None,
+        initial_inputs=None,
+        return_std=False,
+        interval="prediction",
+    ):
         """Free-run simulation from the excitation alone (paper section 4.4).
 
         Parameters
@@ -205,12 +225,23 @@ such, default=None
             Give it with ``initial_outputs`` to continue a record from the
             middle of the motion; only the last ``input_delay + input_lags -
             1`` rows are used.
+        return_std : bool, default=False
+            Also return the standard deviation of every sample (delta
+            method, see :ref:`uncertainty`).
+        interval : {"prediction", "confidence"}, default="prediction"
+            What the standard deviation is of (only used with
+            ``return_std``): ``"prediction"``, a new measurement (weight
+            uncertainty plus ``noise_variance_``); ``"confidence"``, the
+            model output (weight uncertainty only).
 
         Returns
         -------
         y_sim : ndarray or list of ndarray
             Simulated response; NaN from a sample where the run diverged (a
             :class:`~sysid_nn.DivergenceWarning` says where).
+        y_std : ndarray or list of ndarray
+            Standard deviation of each value of ``y_sim``, same shape; only
+            with ``return_std=True``.
 
         Examples
         --------
@@ -223,7 +254,14 @@ such, default=None
         >>> model.simulate(u).shape
         (200,)
         """
-        return self._simulate(X, initial_outputs, "initial_outputs", initial_inputs)
+        return self._simulate(
+            X,
+            initial_outputs,
+            "initial_outputs",
+            initial_inputs,
+            return_std=return_std,
+            interval=interval,
+        )
 
     # ---------------------------------------------------------- structure
     def _history_length(self) -> int:
@@ -234,12 +272,12 @@ such, default=None
             self.output_lags * self.n_outputs_ + self.input_lags * self.n_features_in_
         )
         return np.array(
-            [n_reg, *self.hidden_layer_sizes, self.n_outputs_], dtype=np.int64
+            [n_reg, *self._hidden_layers(), self.n_outputs_], dtype=np.int64
         )
 
     def _bypass(self) -> bool:
         # Without hidden layers the network is linear already.
-        return bool(self.linear_bypass) and len(self.hidden_layer_sizes) > 0
+        return bool(self.linear_bypass) and len(self._hidden_layers()) > 0
 
     def _history(self, n_seq, initial):
         h = self._history_length()

@@ -14,6 +14,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from sysid_nn._docstrings import fill_doc
+
 __all__ = [
     "InvalidArgumentError",
     "check_finite_array",
@@ -21,6 +23,7 @@ __all__ = [
     "check_positive",
     "check_positive_int",
     "check_real",
+    "check_same_width",
 ]
 
 
@@ -32,52 +35,70 @@ class InvalidArgumentError(ValueError, TypeError):
     """
 
 
+#: Sections every scalar checker shares, filled in by :func:`_checker_doc`.
+_VALUE_DOC = """\
+Parameters
+----------
+x : object
+    The value to check ({what}).
+name : str
+    The argument name used in the error message."""
+_RETURNS_DOC = """\
+Returns
+-------
+{kind}
+    ``{kind}(x)``."""
+
+
+def _checker_doc(what: str, kind: type):
+    """Fill ``%(value)s`` and ``%(returns)s`` in a checker's docstring."""
+    return fill_doc(
+        value=_VALUE_DOC.format(what=what),
+        returns=_RETURNS_DOC.format(kind=kind.__name__),
+    )
+
+
+def _check_type(x: object, name: str, kind: type, need: str) -> None:
+    """Raise :class:`InvalidArgumentError` unless ``x`` is a ``kind``, not a bool."""
+    if isinstance(x, bool) or not isinstance(x, kind):
+        raise InvalidArgumentError(
+            f"{name} must be {need}, got {x!r} of type {type(x).__name__}."
+        )
+
+
+@_checker_doc("a real number, not a bool", float)
 def check_real(x: object, name: str) -> float:
     """Return ``x`` as a finite Python float, or raise naming ``name``.
 
-    Parameters
-    ----------
-    x : object
-        The value to check (a real number, not a bool).
-    name : str
-        The argument name used in the error message.
+    %(value)s
 
-    Returns
-    -------
-    float
-        ``float(x)``.
+    %(returns)s
 
     Examples
     --------
     >>> check_real(2, "dt")
     2.0
+    >>> check_real(True, "dt")
+    Traceback (most recent call last):
+    ...
+    sysid_nn._validation.InvalidArgumentError: dt must be a real number, got True ...
     """
-    if isinstance(x, bool) or not isinstance(x, numbers.Real):
-        raise InvalidArgumentError(
-            f"{name} must be a real number, got {x!r} of type {type(x).__name__}."
-        )
+    _check_type(x, name, numbers.Real, "a real number")
     value = float(x)
     if not np.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value!r}; pass a finite number.")
     return value
 
 
+@_checker_doc("a real number", float)
 def check_positive(x: object, name: str, *, allow_zero: bool = False) -> float:
     """Return ``x`` as a float after checking that it is positive.
 
-    Parameters
-    ----------
-    x : object
-        The value to check.
-    name : str
-        The argument name used in the error message.
+    %(value)s
     allow_zero : bool, default=False
         Accept ``0`` as well (non-negative check).
 
-    Returns
-    -------
-    float
-        ``float(x)``.
+    %(returns)s
 
     Examples
     --------
@@ -95,6 +116,7 @@ def check_positive(x: object, name: str, *, allow_zero: bool = False) -> float:
     return value
 
 
+@_checker_doc("a real number", float)
 def check_in_range(
     x: object,
     name: str,
@@ -105,21 +127,13 @@ def check_in_range(
 ) -> float:
     """Return ``x`` as a float after checking ``low <= x <= high``.
 
-    Parameters
-    ----------
-    x : object
-        The value to check.
-    name : str
-        The argument name used in the error message.
+    %(value)s
     low, high : float
         The bounds of the admissible interval.
     closed : tuple of bool, default=(True, True)
         Whether the lower and upper bound belong to the interval.
 
-    Returns
-    -------
-    float
-        ``float(x)``.
+    %(returns)s
 
     Examples
     --------
@@ -139,30 +153,20 @@ def check_in_range(
     return value
 
 
+@_checker_doc("an integral number, not a bool", int)
 def check_positive_int(x: object, name: str) -> int:
     """Return ``x`` as an int after checking it is an integer >= 1.
 
-    Parameters
-    ----------
-    x : object
-        The value to check (an integral number, not a bool).
-    name : str
-        The argument name used in the error message.
+    %(value)s
 
-    Returns
-    -------
-    int
-        ``int(x)``.
+    %(returns)s
 
     Examples
     --------
     >>> check_positive_int(25, "n_realizations")
     25
     """
-    if isinstance(x, bool) or not isinstance(x, numbers.Integral):
-        raise InvalidArgumentError(
-            f"{name} must be an integer >= 1, got {x!r} of type {type(x).__name__}."
-        )
+    _check_type(x, name, numbers.Integral, "an integer >= 1")
     if x < 1:
         raise ValueError(f"{name} must be an integer >= 1, got {x!r}; pass at least 1.")
     return int(x)
@@ -223,3 +227,36 @@ def check_finite_array(
             f"interpolate them before passing {name}."
         )
     return arr
+
+
+def check_same_width(
+    arrays: Sequence[np.ndarray], name: str, what: str = "columns"
+) -> int:
+    """Return the number of columns that all 2-D ``arrays`` share.
+
+    Parameters
+    ----------
+    arrays : sequence of ndarray
+        The 2-D sequences of one argument, one per experiment.
+    name : str
+        The argument name used in the error message.
+    what : str, default="columns"
+        What a column is, e.g. ``"features"`` or ``"outputs"``.
+
+    Returns
+    -------
+    int
+        The common number of columns.
+
+    Examples
+    --------
+    >>> check_same_width([np.zeros((5, 2)), np.ones((3, 2))], "X")
+    2
+    """
+    widths = sorted({a.shape[1] for a in arrays})
+    if len(widths) > 1:
+        raise ValueError(
+            f"All sequences of {name} must have the same number of {what}; got "
+            f"{widths}."
+        )
+    return widths[0]

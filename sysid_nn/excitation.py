@@ -19,6 +19,7 @@ import scipy.signal
 from numpy.typing import ArrayLike
 from sklearn.utils import check_random_state
 
+from sysid_nn._docstrings import fill_doc
 from sysid_nn._validation import (
     check_finite_array,
     check_positive,
@@ -39,6 +40,27 @@ __all__ = [
 #: Two-sided spectral density of unit-intensity white noise:
 #: E[W(t) W(t + tau)] = delta(tau).
 UNIT_INTENSITY_S0 = 1.0 / (2.0 * np.pi)
+
+
+# Parameters shared by several functions, documented once.
+_FILTER_PARAMETERS = """\
+zeta_s : float, default=0.5
+    Damping ratio of the filter.
+omega_s : float, default=30.0
+    Circular eigenfrequency of the filter in rad/s.
+s0 : float, default=1/(2 pi)
+    Two-sided spectral density of the input white noise.
+dt : float or None, default=None
+    Ordinate spacing of a broken-line input; ``None`` for ideal white noise.
+""".rstrip("\n")
+_RECORD_PARAMETERS = """\
+n_realizations : int or None, default=None
+    Number of independent records; ``None`` returns a single 1-D record.
+random_state : int, RandomState instance or None, default=None
+    Seed or generator, converted with :func:`sklearn.utils.check_random_state`.
+""".rstrip("\n")
+_document_filter = fill_doc(filter_parameters=_FILTER_PARAMETERS)
+_document_records = fill_doc(record_parameters=_RECORD_PARAMETERS)
 
 
 def _check_t1_t2(t1: float, t2: float) -> tuple[float, float]:
@@ -107,6 +129,7 @@ def modulation(
     return r0 * u**c * np.exp(-c * (u - 1.0))
 
 
+@_document_records
 def broken_line_white_noise(
     n_samples: int,
     dt: float,
@@ -133,10 +156,7 @@ def broken_line_white_noise(
         Number of ordinates (sample times).
     dt : float
         Spacing of the ordinates in seconds.
-    n_realizations : int or None, default=None
-        Number of independent records; ``None`` returns a single 1-D record.
-    random_state : int, RandomState instance or None, default=None
-        Seed or generator, converted with :func:`sklearn.utils.check_random_state`.
+    %(record_parameters)s
 
     Returns
     -------
@@ -263,6 +283,7 @@ def kanai_tajimi(
     return f
 
 
+@_document_filter
 def kanai_tajimi_spectrum(
     omega: ArrayLike,
     zeta_s: float = 0.5,
@@ -287,14 +308,7 @@ def kanai_tajimi_spectrum(
     ----------
     omega : array-like of float
         Circular frequencies in rad/s.
-    zeta_s : float, default=0.5
-        Damping ratio of the filter.
-    omega_s : float, default=30.0
-        Circular eigenfrequency of the filter in rad/s.
-    s0 : float, default=1/(2 pi)
-        Two-sided spectral density of the input white noise.
-    dt : float or None, default=None
-        Ordinate spacing of a broken-line input; ``None`` for ideal white noise.
+    %(filter_parameters)s
 
     Returns
     -------
@@ -319,6 +333,7 @@ def kanai_tajimi_spectrum(
     return s
 
 
+@_document_filter
 def kanai_tajimi_variance(
     zeta_s: float = 0.5,
     omega_s: float = 30.0,
@@ -345,14 +360,7 @@ def kanai_tajimi_variance(
 
     Parameters
     ----------
-    zeta_s : float, default=0.5
-        Damping ratio of the filter.
-    omega_s : float, default=30.0
-        Circular eigenfrequency of the filter in rad/s.
-    s0 : float, default=1/(2 pi)
-        Two-sided spectral density of the input white noise.
-    dt : float or None, default=None
-        Ordinate spacing of a broken-line input; ``None`` for ideal white noise.
+    %(filter_parameters)s
 
     Returns
     -------
@@ -384,6 +392,7 @@ def kanai_tajimi_variance(
     return float(c @ p[:2, :2] @ c)
 
 
+@_document_records
 def multisine(
     n_samples: int,
     dt: float,
@@ -410,10 +419,7 @@ def multisine(
         Frequency band in Hz, ``0 <= f_min <= f_max <= 1 / (2 dt)``.
     rms : float, default=1.0
         Root-mean-square value of each record, ``> 0``.
-    n_realizations : int or None, default=None
-        Number of independent records; ``None`` returns a single 1-D record.
-    random_state : int, RandomState instance or None, default=None
-        Seed or generator, converted with :func:`sklearn.utils.check_random_state`.
+    %(record_parameters)s
 
     Returns
     -------
@@ -457,6 +463,7 @@ def multisine(
     return u * (rms / np.sqrt(np.mean(u**2, axis=-1, keepdims=True)))
 
 
+@_document_records
 def paper_excitation(
     n_samples: int,
     dt: float,
@@ -487,10 +494,7 @@ def paper_excitation(
         Time of maximum intensity and of half intensity, ``0 < t1 < t2``.
     zeta_s, omega_s : float, default=0.5, 30.0
         Damping ratio and circular eigenfrequency (rad/s) of the soil filter.
-    n_realizations : int or None, default=None
-        Number of independent records; ``None`` returns a single 1-D record.
-    random_state : int, RandomState instance or None, default=None
-        Seed or generator, converted with :func:`sklearn.utils.check_random_state`.
+    %(record_parameters)s
 
     Returns
     -------

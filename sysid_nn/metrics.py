@@ -21,6 +21,9 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from sysid_nn._docstrings import fill_doc
+from sysid_nn._validation import check_same_width
+
 __all__ = [
     "ErrorStatistics",
     "error_statistics",
@@ -98,12 +101,7 @@ def _as_sequence_list(
         if not allow_nan:
             _raise_on_nan(arr, where)
         sequences.append(arr)
-    widths = {arr.shape[1] for arr in sequences}
-    if len(widths) > 1:
-        raise ValueError(
-            f"The sequences of {name} have different numbers of columns "
-            f"{sorted(widths)}; every sequence must have the same columns."
-        )
+    check_same_width(sequences, name)
     return sequences, is_list
 
 
@@ -162,6 +160,18 @@ def _aggregate(values: np.ndarray, multioutput: MultiOutput) -> float | np.ndarr
 # ----------------------------------------------------------------------------
 # Error measures
 # ----------------------------------------------------------------------------
+#: The parameters every error measure takes, documented once.
+_MEASURE_PARAMETERS = """\
+Parameters
+----------
+y_true, y_pred : array-like or list of array-like
+    Measured and model outputs, ``(n_samples,)`` or
+    ``(n_samples, n_outputs)``, or lists of such sequences.
+multioutput : {"uniform_average", "raw_values"}, default="uniform_average"
+    Average over outputs, or return one value per output."""
+
+
+@fill_doc(parameters=_MEASURE_PARAMETERS)
 def nrmse(
     y_true: Any, y_pred: Any, *, multioutput: MultiOutput = "uniform_average"
 ) -> float | np.ndarray:
@@ -172,13 +182,7 @@ def nrmse(
     gives 1, a perfect model 0. For a list of sequences the means and the
     standard deviation run over all samples of all sequences.
 
-    Parameters
-    ----------
-    y_true, y_pred : array-like or list of array-like
-        Measured and model outputs, ``(n_samples,)`` or
-        ``(n_samples, n_outputs)``, or lists of such sequences.
-    multioutput : {"uniform_average", "raw_values"}, default="uniform_average"
-        Average over outputs, or return one value per output.
+    %(parameters)s
 
     Returns
     -------
@@ -199,6 +203,7 @@ def nrmse(
     return _aggregate(values, multioutput)
 
 
+@fill_doc(parameters=_MEASURE_PARAMETERS)
 def fit_percent(
     y_true: Any, y_pred: Any, *, multioutput: MultiOutput = "uniform_average"
 ) -> float | np.ndarray:
@@ -207,12 +212,7 @@ def fit_percent(
     The usual system-identification fit (equal to ``100 (1 - NRMSE)``):
     100 is perfect, 0 is no better than the mean, negative is worse.
 
-    Parameters
-    ----------
-    y_true, y_pred : array-like or list of array-like
-        As in :func:`nrmse`.
-    multioutput : {"uniform_average", "raw_values"}, default="uniform_average"
-        Average over outputs, or return one value per output.
+    %(parameters)s
 
     Returns
     -------
@@ -228,6 +228,7 @@ def fit_percent(
     return _aggregate(values, multioutput)
 
 
+@fill_doc(parameters=_MEASURE_PARAMETERS)
 def r2(
     y_true: Any, y_pred: Any, *, multioutput: MultiOutput = "uniform_average"
 ) -> float | np.ndarray:
@@ -236,12 +237,7 @@ def r2(
     ``1 - SSE / SST`` per output, as scikit-learn's ``r2_score`` but
     accepting lists of sequences and letting NaN propagate instead of raising.
 
-    Parameters
-    ----------
-    y_true, y_pred : array-like or list of array-like
-        As in :func:`nrmse`.
-    multioutput : {"uniform_average", "raw_values"}, default="uniform_average"
-        Average over outputs, or return one value per output.
+    %(parameters)s
 
     Returns
     -------

@@ -4,7 +4,10 @@ matplotlib is imported inside the functions, so ``import sysid_nn`` (and
 even ``import sysid_nn.plotting``) does not load it. Every function takes
 ``ax=None``: given Axes are drawn on, otherwise a new figure is created. A
 single-panel function returns its Axes, a multi-panel one its Figure.
-Confidence bands are drawn as dotted horizontal lines, as in the paper.
+Confidence bands are drawn as dotted horizontal lines, as in the paper. Axis
+labels carry units where they are known (time and lags in seconds); the
+labels of the user's quantities are arguments, so that their units can be
+given (e.g. ``ylabel="displacement X [m]"``).
 """
 
 from __future__ import annotations
@@ -13,6 +16,8 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from sysid_nn._docstrings import fill_doc
 
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
@@ -28,6 +33,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "panel_figure",
     "plot_autocorrelation",
+    "plot_band",
     "plot_cross_correlation",
     "plot_error_statistics",
     "plot_hysteresis",
@@ -36,7 +42,18 @@ __all__ = [
     "plot_response",
 ]
 
+# The ``ax`` (and ``title``) parameters of the plotting functions, documented once.
+_AX_DOC = "ax : Axes, optional\n    Axes to draw on; a new figure if None."
+_document_axes = fill_doc(
+    ax=_AX_DOC,
+    title_ax="title : str\n    Axes title.\n" + _AX_DOC,
+    ax_pair="ax : pair of Axes, optional\n    Axes for the two panels; a new "
+    "figure if None.",
+)
+
 _BAND_STYLE = {"color": "k", "linestyle": ":", "linewidth": 1.0}
+_REFERENCE_STYLE = {"color": "0.65", "linewidth": 2.5, "zorder": 1}
+_MODEL_STYLE = {"linestyle": "-", "linewidth": 0.8, "zorder": 2}
 
 
 def _new_axes(ax: Axes | None) -> Axes:
@@ -61,9 +78,9 @@ def _new_panels(ax: Sequence[Axes] | None, n: int, **kwargs: Any) -> list[Axes]:
 
 
 def panel_figure(
-    n_rows: int, *, row_height: float = 2.4, width: float = 7.5
+    n_rows: int, *, n_cols: int = 1, row_height: float = 2.4, width: float = 7.5
 ) -> tuple[Figure, list[Axes]]:
-    """Create a figure of ``n_rows`` stacked panels without pyplot.
+    """Create a figure of ``n_rows`` by ``n_cols`` panels without pyplot.
 
     The figure is not registered with pyplot and does not switch the user's
     backend: it is meant for scripts and reports that save figures to files
@@ -72,7 +89,9 @@ def panel_figure(
     Parameters
     ----------
     n_rows : int
-        Number of panels, one above the other.
+        Number of panel rows, one above the other.
+    n_cols : int, default=1
+        Number of panels side by side in each row.
     row_height : float, default=2.4
         Height of each panel in inches.
     width : float, default=7.5
@@ -83,7 +102,7 @@ def panel_figure(
     fig : matplotlib.figure.Figure
         The figure (constrained layout).
     axes : list of matplotlib.axes.Axes
-        Its panels, top to bottom.
+        Its panels, row by row from the top.
 
     Examples
     --------
@@ -92,12 +111,13 @@ def panel_figure(
     >>> len(axes), round(float(fig.get_figheight()), 2)
     (3, 8.4)
     """
-    if not isinstance(n_rows, (int, np.integer)) or n_rows < 1:
-        raise ValueError(f"n_rows must be a positive integer; got {n_rows!r}.")
+    for name, value in (("n_rows", n_rows), ("n_cols", n_cols)):
+        if not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{name} must be a positive integer; got {value!r}.")
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(width, 1.2 + row_height * n_rows), layout="constrained")
-    return fig, list(np.ravel(fig.subplots(n_rows, 1, squeeze=False)))
+    return fig, list(np.ravel(fig.subplots(n_rows, n_cols, squeeze=False)))
 
 
 def _band(ax: Axes, band: float, alpha: float) -> None:
@@ -112,6 +132,22 @@ def _lag_axis(lags: np.ndarray, dt: float | None) -> tuple[np.ndarray, str]:
     return lags * dt, "lag τ [s]"
 
 
+def _lag_style(lags: np.ndarray) -> dict[str, Any]:
+    """A marker per lag while the markers stay apart, a plain line beyond."""
+    return {"marker": "o" if lags.size <= 61 else "", "markersize": 3}
+
+
+def _finish(ax: Axes, xlabel: str, ylabel: str, title: str | None) -> Axes:
+    """Label the axes, set the title (None keeps it) and draw the legend."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    if title is not None:
+        ax.set_title(title)
+    ax.legend()
+    return ax
+
+
+@_document_axes
 def plot_records(
     t: Any,
     excitation: Any,
@@ -132,8 +168,7 @@ def plot_records(
         row per record (all drawn).
     excitation_label, displacement_label : str
         Y-axis labels (units are the user's).
-    ax : pair of Axes, optional
-        Axes for the two panels; a new figure if None.
+    %(ax_pair)s
 
     Returns
     -------
@@ -159,17 +194,19 @@ def plot_records(
         for row in np.atleast_2d(np.asarray(data, dtype=float)):
             panel.plot(t, row, linewidth=0.8)
         panel.set_ylabel(label)
-    bottom.set_xlabel("time t [s]")
+        panel.set_xlabel("time t [s]")
     top.set_title("Training data")
     return top.figure
 
 
+@_document_axes
 def plot_response(
     t: Any,
     measured: Any,
     model: Any,
     *,
     label: str = "model",
+    ylabel: str = "displacement",
     title: str | None = None,
     ax: Axes | None = None,
 ) -> Axes:
@@ -186,15 +223,18 @@ def plot_response(
         compare several models; drawn dashed.
     label : str, default="model"
         Legend text of a single ``model``.
+    ylabel : str, default="displacement"
+        Y-axis label, with the unit of the response, e.g.
+        ``"displacement X [m]"``.
     title : str, optional
         Axes title.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    %(ax)s
 
     Returns
     -------
     matplotlib.axes.Axes
-        The Axes drawn on, with a legend.
+        The Axes drawn on: the measured response solid, every model dashed,
+        and a legend.
 
     Examples
     --------
@@ -211,14 +251,10 @@ def plot_response(
     ax.plot(t, np.asarray(measured, dtype=float), "k-", linewidth=1.0, label="measured")
     for name, values in models.items():
         ax.plot(t, np.asarray(values, dtype=float), "--", linewidth=1.0, label=name)
-    ax.set_xlabel("time t [s]")
-    ax.set_ylabel("displacement")
-    if title is not None:
-        ax.set_title(title)
-    ax.legend()
-    return ax
+    return _finish(ax, "time t [s]", ylabel, title)
 
 
+@_document_axes
 def plot_autocorrelation(
     whiteness_result: WhitenessResult,
     *,
@@ -234,10 +270,7 @@ def plot_autocorrelation(
         From :func:`sysid_nn.residuals.whiteness_test`.
     dt : float, optional
         Sampling step; lags are shown in seconds when given.
-    title : str
-        Axes title.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    %(title_ax)s
 
     Returns
     -------
@@ -257,19 +290,17 @@ def plot_autocorrelation(
     """
     ax = _new_axes(ax)
     x, xlabel = _lag_axis(whiteness_result.lags, dt)
-    ax.plot(x, whiteness_result.acf, "o-", markersize=3, label="autocorrelation")
+    ax.plot(x, whiteness_result.acf, label="autocorrelation", **_lag_style(x))
     _band(ax, whiteness_result.band, whiteness_result.alpha)
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("r_ee(τ) / r_ee(0)")
-    ax.set_title(title)
-    ax.legend()
-    return ax
+    return _finish(ax, xlabel, "r_ee(τ) / r_ee(0)", title)
 
 
+@_document_axes
 def plot_cross_correlation(
     cc_result: CrossCorrelationResult,
     *,
     dt: float | None = None,
+    input_names: Sequence[str] | None = None,
     title: str = "Cross-correlation of residuals and input",
     ax: Axes | None = None,
 ) -> Axes:
@@ -279,13 +310,13 @@ def plot_cross_correlation(
     ----------
     cc_result : CrossCorrelationResult
         From :func:`sysid_nn.residuals.cross_correlation_test`; one line per
-        input column (labelled ``input i``).
+        input column.
     dt : float, optional
         Sampling step; lags are shown in seconds when given.
-    title : str
-        Axes title.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    input_names : sequence of str, optional
+        Legend text of every input column, e.g. ``["excitation F"]``;
+        ``input i`` by default.
+    %(title_ax)s
 
     Returns
     -------
@@ -305,40 +336,53 @@ def plot_cross_correlation(
     >>> import matplotlib.pyplot as plt
     >>> plt.close(ax.figure)
     """
+    n = cc_result.n_inputs
+    names = [f"input {i}" for i in range(n)] if input_names is None else input_names
+    if len(names) != n:
+        raise ValueError(
+            f"input_names must name the {n} input column(s); got {len(names)} names."
+        )
     ax = _new_axes(ax)
     x, xlabel = _lag_axis(cc_result.lags, dt)
-    for i in range(cc_result.n_inputs):
-        ax.plot(x, cc_result.ccf[:, i], "o-", markersize=3, label=f"input {i}")
+    for i, name in enumerate(names):
+        ax.plot(x, cc_result.ccf[:, i], label=name, **_lag_style(x))
     _band(ax, cc_result.band, cc_result.alpha)
     ax.axvline(0.0, color="0.7", linewidth=0.5)
-    ax.set_xlabel(xlabel + "  (τ > 0: input leads residual)")
-    ax.set_ylabel("r_eu(τ)")
-    ax.set_title(title)
-    ax.legend()
-    return ax
+    return _finish(ax, xlabel + "  (τ > 0: input leads residual)", "r_eu(τ)", title)
 
 
+@_document_axes
 def plot_error_statistics(
     statistics: Mapping[str, ErrorStatistics],
     *,
+    unit: str | None = None,
+    scale: str = "auto",
     title: str = "Error statistics",
     ax: Axes | None = None,
 ) -> Axes:
     """Draw bars of ``mu_Ns`` and ``sigma_Ns`` for several models (figs 4.5, 4.7).
 
+    Every bar is labelled with its value, so that bars of very different
+    heights can be read off.
+
     Parameters
     ----------
     statistics : dict of str to ErrorStatistics
         ``{model name: error_statistics(...)}``.
-    title : str
-        Axes title.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+    unit : str, optional
+        Unit of the errors (the output's), e.g. ``"m"``, shown on the y axis.
+    scale : {"auto", "linear", "symlog"}, default="auto"
+        Y-axis scale. ``"symlog"`` is logarithmic in both directions
+        (``mu_Ns`` may be negative) and linear below the smallest non-zero
+        bar; ``"auto"`` chooses it when the largest bar is more than 100
+        times the smallest non-zero one.
+    %(title_ax)s
 
     Returns
     -------
     matplotlib.axes.Axes
-        Two bar groups (``mu_Ns``, ``sigma_Ns``), one bar per model each.
+        Two bar groups (``mu_Ns``, ``sigma_Ns``), one bar per model each,
+        with value labels.
 
     Examples
     --------
@@ -355,29 +399,57 @@ def plot_error_statistics(
     """
     if not statistics:
         raise ValueError("statistics is empty; pass {model name: ErrorStatistics}.")
+    if scale not in ("auto", "linear", "symlog"):
+        raise ValueError(f"scale must be 'auto', 'linear' or 'symlog'; got {scale!r}.")
     ax = _new_axes(ax)
     names = list(statistics)
     x = np.arange(len(names))
     width = 0.38
     mus = [statistics[n].mu for n in names]
     sigmas = [statistics[n].sigma for n in names]
-    ax.bar(x - width / 2, mus, width, label="μ_Ns (eq. 19)")
-    ax.bar(x + width / 2, sigmas, width, label="σ_Ns (eq. 20)")
+    for shift, values, label in (
+        (-width / 2, mus, "μ_Ns (eq. 19)"),
+        (width / 2, sigmas, "σ_Ns (eq. 20)"),
+    ):
+        bars = ax.bar(x + shift, values, width, label=label)
+        ax.bar_label(bars, fmt="%.2g", fontsize=7, padding=2)
+    sizes = np.abs(np.asarray(mus + sigmas, dtype=float))
+    sizes = sizes[np.isfinite(sizes) & (sizes > 0)]
+    if scale == "auto":
+        scale = "symlog" if sizes.size and sizes.max() > 100 * sizes.min() else "linear"
+    if scale == "symlog" and sizes.size:
+        ax.set_yscale("symlog", linthresh=sizes.min())
+        # Room for the value labels: a factor of 5 beyond the longest bars.
+        ends = np.asarray(mus + sigmas, dtype=float)
+        ends = ends[np.isfinite(ends)]
+        ax.set_ylim(5 * min(ends.min(), 0.0), 5 * max(ends.max(), 0.0))
+        # At most five labelled decades a side, no minor ticks: a symlog axis
+        # otherwise labels every decade, which is slow to lay out and unreadable.
+        low, high = np.floor(np.log10(sizes.min())), np.ceil(np.log10(sizes.max()))
+        decades = 10.0 ** np.arange(low, high + 1, max(1, int(high - low) // 5 + 1))
+        ticks = [*(-decades[::-1] if ends.min() < 0 else []), 0.0, *decades]
+        ax.set_yticks(ticks if ends.max() > 0 else ticks[: decades.size + 1])
+        ax.minorticks_off()
+    else:
+        ax.margins(y=0.12)
     ax.axhline(0.0, color="k", linewidth=0.5)
     ax.set_xticks(x, names)
-    ax.set_ylabel("error")
-    ax.set_title(title)
-    ax.legend()
-    return ax
+    ylabel = "error" if unit is None else f"error [{unit}]"
+    if scale == "symlog":
+        ylabel += " (symmetric log scale)"
+    return _finish(ax, "", ylabel, title)
 
 
+@_document_axes
 def plot_hysteresis(
     displacement: Any,
     restoring_force: Any,
     *,
     label: str = "measured",
     models: Mapping[str, Any] | None = None,
+    xlabel: str = "displacement",
     ylabel: str = "restoring force",
+    title: str = "Hysteresis loop",
     ax: Axes | None = None,
 ) -> Axes:
     """Draw a hysteresis loop: restoring force (or hysteretic state) vs displacement.
@@ -385,21 +457,26 @@ def plot_hysteresis(
     Parameters
     ----------
     displacement, restoring_force : array-like of shape (n_samples,)
-        Reference trajectory, drawn solid.
+        Reference trajectory, drawn as a wide grey line.
     label : str, default="measured"
         Legend text of the reference.
     models : dict of str to array-like or (array-like, array-like), optional
-        Models to overlay (dashed): a force over the same ``displacement``,
-        or a tuple ``(displacement, force)`` of the model's own.
+        Models to overlay (thin coloured lines): a force over the same
+        ``displacement``, or a tuple ``(displacement, force)`` of the model's
+        own.
+    xlabel : str, default="displacement"
+        X-axis label, with the unit, e.g. ``"displacement X [m]"``.
     ylabel : str, default="restoring force"
-        Y-axis label, e.g. ``"hysteretic state Z"``.
-    ax : Axes, optional
-        Axes to draw on; a new figure if None.
+        Y-axis label, e.g. ``"hysteretic state Z [m]"``.
+    title : str, default="Hysteresis loop"
+        Axes title.
+    %(ax)s
 
     Returns
     -------
     matplotlib.axes.Axes
-        The Axes drawn on, with a legend.
+        The loops of the reference (grey) and of the models (coloured), with
+        a legend naming them.
 
     Examples
     --------
@@ -412,35 +489,27 @@ def plot_hysteresis(
     >>> plt.close(ax.figure)
     """
     ax = _new_axes(ax)
-    ax.plot(
-        np.asarray(displacement, dtype=float),
-        np.asarray(restoring_force, dtype=float),
-        "k-",
-        linewidth=0.8,
-        label=label,
-    )
+    # The reference as a wide grey band under the models' thin lines, so that
+    # both stay visible where they coincide.
+    curves = [(label, (displacement, restoring_force), _REFERENCE_STYLE)]
     for name, value in (models or {}).items():
-        d, f = value if isinstance(value, tuple) else (displacement, value)
+        xy = value if isinstance(value, tuple) else (displacement, value)
+        curves.append((name, xy, _MODEL_STYLE))
+    for name, (d, f), style in curves:
         ax.plot(
-            np.asarray(d, dtype=float),
-            np.asarray(f, dtype=float),
-            "--",
-            linewidth=0.8,
-            label=name,
+            np.asarray(d, dtype=float), np.asarray(f, dtype=float), label=name, **style
         )
-    ax.set_xlabel("displacement")
-    ax.set_ylabel(ylabel)
-    ax.set_title("Hysteresis loop")
-    ax.legend()
-    return ax
+    return _finish(ax, xlabel, ylabel, title)
 
 
+@_document_axes
 def plot_residual_analysis(
     analysis: ResidualAnalysis,
     *,
     sequence: int | str = 0,
     output: int = 0,
     dt: float | None = None,
+    input_names: Sequence[str] | None = None,
     ax: Sequence[Axes] | None = None,
 ) -> Figure:
     """Autocorrelation and cross-correlation panels of a residual analysis.
@@ -455,8 +524,9 @@ def plot_residual_analysis(
         Output column.
     dt : float, optional
         Sampling step; lags in seconds when given.
-    ax : pair of Axes, optional
-        Axes for the two panels; a new figure if None.
+    input_names : sequence of str, optional
+        Legend text of every input column (default ``input i``).
+    %(ax_pair)s
 
     Returns
     -------
@@ -501,8 +571,74 @@ def plot_residual_analysis(
     plot_cross_correlation(
         analysis.cross_correlation[key],
         dt=dt,
+        input_names=input_names,
         title=f"Cross-correlation of {kind} errors and input",
         ax=bottom,
     )
     top.figure.tight_layout()
     return top.figure
+
+
+def plot_band(
+    t: Any,
+    mean: Any,
+    std: Any,
+    *,
+    level: float = 0.95,
+    label: str = "model",
+    color: str | None = None,
+    ax: Axes | None = None,
+) -> Axes:
+    """Predicted or simulated response with its shaded interval.
+
+    Parameters
+    ----------
+    t : array-like of shape (n_samples,)
+        Time.
+    mean : array-like of shape (n_samples,)
+        Predicted or simulated response, drawn as a line.
+    std : array-like of shape (n_samples,)
+        Its standard deviation, as returned with ``return_std=True``.
+    level : float, default=0.95
+        Level of the Gaussian interval shaded around ``mean`` (see
+        :func:`sysid_nn.uncertainty.normal_interval`).
+    label : str, default="model"
+        Legend text of the line; the band is labelled with its level.
+    color : str, optional
+        Colour of the line and the band; the next colour of the Axes if None.
+    ax : Axes, optional
+        Axes to draw on; a new figure if None.
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The Axes drawn on.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> t = np.linspace(0, 1, 50)
+    >>> ax = plot_band(t, np.sin(t), np.full(50, 0.1), level=0.9)
+    >>> [line.get_label() for line in ax.get_lines()]
+    ['model']
+    >>> len(ax.collections)
+    1
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close(ax.figure)
+    """
+    from sysid_nn.uncertainty import normal_interval
+
+    ax = _new_axes(ax)
+    mean = np.asarray(mean, dtype=float)
+    lower, upper = normal_interval(mean, np.asarray(std, dtype=float), level)
+    (line,) = ax.plot(t, mean, "-", linewidth=1.0, color=color, label=label)
+    ax.fill_between(
+        t,
+        lower,
+        upper,
+        color=line.get_color(),
+        alpha=0.25,
+        linewidth=0.0,
+        label=f"{100 * level:g} % interval",
+    )
+    return ax

@@ -51,6 +51,7 @@ import scipy.linalg
 from scipy import stats
 from statsmodels.tsa.stattools import ccovf
 
+from sysid_nn._docstrings import fill_doc
 from sysid_nn.metrics import _as_sequence_list, _check_paired, _is_sequence_list
 
 __all__ = [
@@ -104,6 +105,26 @@ def _check_settings(max_lag: Any, alpha: Any, residuals: list[np.ndarray]) -> fl
     if not (isinstance(alpha, (float, int)) and 0 < alpha < 1):
         raise ValueError(f"alpha must be a number in (0, 1), e.g. 0.05; got {alpha!r}.")
     return float(stats.norm.ppf(1 - alpha / 2))
+
+
+class _WholeFrame(pd.DataFrame):
+    """A DataFrame that prints whole, whatever pandas' display options.
+
+    Test summaries are short and every column matters (test, statistic,
+    dof, p-value, verdict): ``print(summary)`` must not elide rows or
+    columns to fit a terminal. Everything else is pandas' DataFrame;
+    ``pd.DataFrame(summary)`` gives a plain one.
+    """
+
+    @property
+    def _constructor(self):
+        return _WholeFrame
+
+    def __repr__(self) -> str:
+        return self.to_string()
+
+    def _repr_html_(self) -> str:
+        return self.to_html()
 
 
 # ----------------------------------------------------------------------------
@@ -167,8 +188,26 @@ def _chi2_statistic(
     return float(n * rho @ solution)
 
 
+#: The attributes every test result shares, documented once.
+_LEVEL_DOC = """\
+alpha : float
+    Significance level.
+n_samples : int
+    Number of samples ``N``, pooled over sequences."""
+
+
+class _ChiSquareVerdict:
+    """The decision of a result with ``p_value`` and ``alpha`` fields."""
+
+    @property
+    def passed(self) -> bool:
+        """True if the chi-square test does not reject (``p_value >= alpha``)."""
+        return bool(self.p_value >= self.alpha)
+
+
+@fill_doc(level=_LEVEL_DOC)
 @dataclass(frozen=True, eq=False)
-class CorrelationTest:
+class CorrelationTest(_ChiSquareVerdict):
     """One correlation function with its confidence band and chi-square test.
 
     Attributes
@@ -189,18 +228,13 @@ class CorrelationTest:
         Degrees of freedom, the number of lags.
     p_value : float
         Upper tail probability of the statistic.
-    alpha : float
-        Significance level.
-    n_samples : int
-        Number of samples ``N`` (pooled over sequences).
+    %(level)s
 
     Examples
     --------
     >>> import numpy as np
-    >>> rng = np.random.default_rng(0)
-    >>> res = nonlinear_correlation_tests(rng.standard_normal(500),
-    ...                                   rng.standard_normal(500), max_lag=5)
-    >>> test = res.get("phi_u2e")
+    >>> e, u = np.random.default_rng(0).standard_normal((2, 500))
+    >>> test = nonlinear_correlation_tests(e, u, max_lag=5).get("phi_u2e")
     >>> test.dof, test.lags.tolist()
     (11, [-5, -4, -3, -2, -1, 0, 1, 2, 3, 4, 5])
     """
@@ -215,11 +249,6 @@ class CorrelationTest:
     p_value: float
     alpha: float
     n_samples: int
-
-    @property
-    def passed(self) -> bool:
-        """True if the chi-square test does not reject (``p_value >= alpha``)."""
-        return bool(self.p_value >= self.alpha)
 
     @property
     def n_outside(self) -> int:
@@ -247,6 +276,12 @@ class CorrelationTest:
         )
 
 
+def _band_fields(series: list[np.ndarray], z: float, alpha: float) -> dict[str, Any]:
+    """``band``, ``alpha`` and ``n_samples`` of a test on the pooled ``series``."""
+    n = sum(x.size for x in series)
+    return {"band": z / np.sqrt(n), "alpha": float(alpha), "n_samples": n}
+
+
 def _correlation_test(
     name: str,
     white: list[np.ndarray],
@@ -259,28 +294,27 @@ def _correlation_test(
     names: tuple[str, str],
 ) -> CorrelationTest:
     """Correlations of ``white(t)`` with ``regressor(t - lag)`` and their test."""
-    n = sum(w.size for w in white)
+    shared = _band_fields(white, z, alpha)
     rho = _xcorr(white, regressor, lags, names)
-    stat = _chi2_statistic(rho, lags, regressor, n, names[1])
+    stat = _chi2_statistic(rho, lags, regressor, shared["n_samples"], names[1])
     return CorrelationTest(
         name=name,
         input=input_index,
         lags=lags,
         values=rho,
-        band=z / np.sqrt(n),
         statistic=stat,
         dof=int(lags.size),
         p_value=float(stats.chi2.sf(stat, lags.size)),
-        alpha=float(alpha),
-        n_samples=n,
+        **shared,
     )
 
 
 # ----------------------------------------------------------------------------
 # Whiteness
 # ----------------------------------------------------------------------------
+@fill_doc(level=_LEVEL_DOC)
 @dataclass(frozen=True, eq=False)
-class WhitenessResult:
+class WhitenessResult(_ChiSquareVerdict):
     """Autocorrelation of the residuals and the chi-square whiteness test.
 
     Attributes
@@ -303,10 +337,7 @@ class WhitenessResult:
         (pooled: ``N - tau`` replaced by the number of lagged pairs).
     ljung_box_p_value : float
         Its p-value (chi-square, ``M`` dof).
-    alpha : float
-        Significance level.
-    n_samples : int
-        ``N`` (pooled over sequences).
+    %(level)s
 
     Examples
     --------
@@ -326,11 +357,6 @@ class WhitenessResult:
     ljung_box_p_value: float
     alpha: float
     n_samples: int
-
-    @property
-    def passed(self) -> bool:
-        """True if whiteness is not rejected (``p_value >= alpha``)."""
-        return bool(self.p_value >= self.alpha)
 
     @property
     def summary(self) -> pd.Series:
@@ -419,7 +445,8 @@ def whiteness_test(
     z = _check_settings(max_lag, alpha, e)
     lags = np.arange(max_lag + 1)
     acf = _xcorr(e, e, lags, ("residuals", "residuals"))
-    n = sum(x.size for x in e)
+    shared = _band_fields(e, z, alpha)
+    n = shared["n_samples"]
     r2 = acf[1:] ** 2
     box_pierce = float(n * r2.sum())
     # Pairs at lag tau: N - tau for one sequence, summed over sequences.
@@ -428,20 +455,19 @@ def whiteness_test(
     return WhitenessResult(
         lags=lags,
         acf=acf,
-        band=z / np.sqrt(n),
         statistic=box_pierce,
         dof=int(max_lag),
         p_value=float(stats.chi2.sf(box_pierce, max_lag)),
         ljung_box=ljung_box,
         ljung_box_p_value=float(stats.chi2.sf(ljung_box, max_lag)),
-        alpha=float(alpha),
-        n_samples=n,
+        **shared,
     )
 
 
 # ----------------------------------------------------------------------------
 # Cross-correlation with the input
 # ----------------------------------------------------------------------------
+@fill_doc(level=_LEVEL_DOC)
 @dataclass(frozen=True, eq=False)
 class CrossCorrelationResult:
     """Residual/input cross-correlation and the two chi-square tests.
@@ -460,10 +486,7 @@ class CrossCorrelationResult:
     negative : tuple of CorrelationTest
         Test over the negative lags ``-M..-1`` (residual leads input:
         feedback), one per input column.
-    alpha : float
-        Significance level.
-    n_samples : int
-        ``N`` (pooled over sequences).
+    %(level)s
 
     Examples
     --------
@@ -513,7 +536,7 @@ class CrossCorrelationResult:
             )
             for t in tests
         ]
-        return pd.DataFrame(rows).sort_values(["input", "side"], ignore_index=True)
+        return _WholeFrame(rows).sort_values(["input", "side"], ignore_index=True)
 
     def to_frame(self) -> pd.DataFrame:
         """Return the cross-correlation of every input with its band.
@@ -619,15 +642,12 @@ def cross_correlation_test(
         common = {"z": z, "alpha": alpha, "input_index": i, "names": names}
         positive.append(_correlation_test("r_eu+", e, col, pos_lags, **common))
         negative.append(_correlation_test("r_eu-", e, col, neg_lags, **common))
-    n = sum(x.size for x in e)
     return CrossCorrelationResult(
         lags=lags,
         ccf=ccf,
-        band=z / np.sqrt(n),
         positive=tuple(positive),
         negative=tuple(negative),
-        alpha=float(alpha),
-        n_samples=n,
+        **_band_fields(e, z, alpha),
     )
 
 
@@ -637,6 +657,7 @@ def cross_correlation_test(
 _NONLINEAR_TESTS = ("phi_ee", "phi_ue", "phi_u2e", "phi_u2e2", "phi_eeu")
 
 
+@fill_doc(level=_LEVEL_DOC)
 @dataclass(frozen=True, eq=False)
 class NonlinearTestResult:
     """Billings-Voon higher-order correlation tests.
@@ -646,18 +667,13 @@ class NonlinearTestResult:
     tests : tuple of CorrelationTest
         ``phi_ee`` once, then ``phi_ue``, ``phi_u2e``, ``phi_u2e2``,
         ``phi_eeu`` for every input column.
-    alpha : float
-        Significance level.
-    n_samples : int
-        ``N`` (pooled over sequences).
+    %(level)s
 
     Examples
     --------
     >>> import numpy as np
-    >>> rng = np.random.default_rng(0)
-    >>> res = nonlinear_correlation_tests(rng.standard_normal(500),
-    ...                                   rng.standard_normal(500), max_lag=5)
-    >>> res.summary["test"].tolist()
+    >>> e, u = np.random.default_rng(0).standard_normal((2, 500))
+    >>> nonlinear_correlation_tests(e, u, max_lag=5).summary["test"].tolist()
     ['phi_ee', 'phi_ue', 'phi_u2e', 'phi_u2e2', 'phi_eeu']
     """
 
@@ -696,7 +712,7 @@ class NonlinearTestResult:
     @property
     def summary(self) -> pd.DataFrame:
         """One row per test and input: chi-square result and band counts."""
-        return pd.DataFrame(
+        return _WholeFrame(
             [
                 {
                     "test": t.name,
@@ -839,8 +855,11 @@ class ResidualAnalysis:
     summary : pandas.DataFrame
         One row per sequence (then ``"pooled"``) x output x input x test with
         columns ``sequence, output, input, test, statistic, dof, p_value,
-        passed, n_samples, status``; ``status`` is ``"ok"`` or
-        ``"divergent"`` (NaN statistics, ``passed=False``).
+        passed, n_samples, status``; ``passed`` is the verdict, ``status`` is
+        ``"ok"`` or ``"divergent"`` (NaN statistics, ``passed=False``).
+        ``print(summary)`` shows every row and column whatever pandas'
+        display options (frames derived from it too);
+        ``pd.DataFrame(summary)`` is a plain DataFrame.
     divergent : tuple of int
         Sequences whose residuals contain NaN (excluded from the pooled tests).
     mode : str
@@ -1127,7 +1146,7 @@ def analyze_residuals(
                     nl = nonlinear_correlation_tests(e, u, max_lag, alpha)
                     nonlin[seq, out] = nl
             rows.extend(_summary_rows(seq, out, (w, c, nl), dofs, n_in, n_samples))
-    summary = pd.DataFrame(rows, columns=_SUMMARY_COLUMNS)
+    summary = _WholeFrame(rows, columns=_SUMMARY_COLUMNS)
     return ResidualAnalysis(
         residuals=residuals,
         whiteness=whiteness,

@@ -368,3 +368,19 @@ def test_bad_simulate_and_generate_arguments():
         osc.generate(2.5)
     with pytest.raises(TypeError, match="dt must be a real number"):
         osc.simulate(np.zeros(10), "0.01")
+
+
+def test_hysteretic_state_follows_the_displacement_history():
+    osc = HystereticOscillator(r0=0.06)
+    rec = osc.generate(2, n_samples=800, random_state=3)
+    z = osc.hysteretic_state(rec.displacement)
+    assert z.shape == rec.displacement.shape
+    # The same law as the simulator: its Z is reproduced from its X alone.
+    np.testing.assert_allclose(z, rec.hysteretic, atol=1e-3 * osc.z0)
+    # Rate-independent: the same path at another pace gives the same Z.
+    x = rec.displacement[0]
+    slow = np.interp(np.arange(2 * x.size - 1) / 2, np.arange(x.size), x)
+    np.testing.assert_allclose(osc.hysteretic_state(slow)[::2], z[0], atol=1e-6)
+    np.testing.assert_array_equal(osc.hysteretic_state(x), z[0])
+    with pytest.raises(ValueError, match="displacement"):
+        osc.hysteretic_state([0.0, np.nan])

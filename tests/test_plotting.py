@@ -220,3 +220,73 @@ def test_residual_analysis_plot_refuses_divergent_sequence():
     )
     with pytest.raises(ValueError, match="sequence 0 diverged"):
         report.plot()
+
+
+def test_panel_figure_columns_row_by_row():
+    _, axes = panel_figure(2, n_cols=3)
+    assert len(axes) == 6
+    rows = [round(ax.get_subplotspec().rowspan.start) for ax in axes]
+    assert rows == [0, 0, 0, 1, 1, 1]
+    with pytest.raises(ValueError, match="n_cols"):
+        panel_figure(1, n_cols=0)
+
+
+def test_plot_cross_correlation_names_the_inputs():
+    rng = np.random.default_rng(4)
+    res = cross_correlation_test(
+        rng.standard_normal(300), rng.standard_normal((300, 2)), 5
+    )
+    ax = plot_cross_correlation(res, input_names=["force F [N]", "base a [m/s²]"])
+    assert legend_texts(ax)[:2] == ["force F [N]", "base a [m/s²]"]
+    with pytest.raises(ValueError, match="input_names must name the 2"):
+        plot_cross_correlation(res, input_names=["force"])
+
+
+def test_plot_error_statistics_readable_across_orders_of_magnitude():
+    close = {
+        "A": error_statistics([[0.1, 0.3]]),
+        "B": error_statistics([[0.2, 0.1]]),
+    }
+    ax = plot_error_statistics(close, unit="m")
+    assert ax.get_yscale() == "linear" and ax.get_ylabel() == "error [m]"
+    labels = [t.get_text() for t in ax.texts]
+    assert len(labels) == 4 and f"{close['A'].sigma:.2g}" in labels
+    apart = {
+        "A": error_statistics([[1e-6, -1e-6]]),
+        "B": error_statistics([[-0.5, 0.7]]),
+    }
+    ax = plot_error_statistics(apart, unit="m")
+    assert ax.get_yscale() == "symlog"
+    assert ax.get_ylabel() == "error [m] (symmetric log scale)"
+    low, high = ax.get_ylim()
+    assert low < apart["B"].mu and high > apart["B"].sigma
+    assert plot_error_statistics(apart, scale="linear").get_yscale() == "linear"
+    with pytest.raises(ValueError, match="scale must be"):
+        plot_error_statistics(apart, scale="log")
+
+
+def test_plot_labels_carry_the_users_units():
+    t = np.linspace(0, 1, 50)
+    ax = plot_response(t, t, t, ylabel="strain ε [µm/m]")
+    assert ax.get_ylabel() == "strain ε [µm/m]"
+    ax = plot_hysteresis(
+        t, t**2, xlabel="drift [mm]", ylabel="force [kN]", title="Storey 1"
+    )
+    assert (ax.get_xlabel(), ax.get_ylabel(), ax.get_title()) == (
+        "drift [mm]",
+        "force [kN]",
+        "Storey 1",
+    )
+    # The reference stays visible under the models: wider and drawn below.
+    ref, model = plot_hysteresis(t, t**2, models={"M": t**2}).get_lines()
+    assert ref.get_linewidth() > model.get_linewidth()
+    assert ref.get_zorder() < model.get_zorder()
+
+
+def test_residual_analysis_plot_names_the_inputs():
+    rng = np.random.default_rng(5)
+    report = analyze_residuals(
+        _Zero(), rng.standard_normal((200, 1)), rng.standard_normal(200), max_lag=5
+    )
+    fig = plot_residual_analysis(report, input_names=["force F [N]"])
+    assert legend_texts(fig.axes[1])[0] == "force F [N]"

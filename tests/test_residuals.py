@@ -415,6 +415,42 @@ def test_analyze_residuals_skip_drops_transient():
     assert report.residuals.shape == (500,)
 
 
+def test_summaries_print_whole_whatever_the_display_options():
+    rng = np.random.default_rng(18)
+    data = [arx_data(rng, 400) for _ in range(3)]
+    X, y = [d[0] for d in data], [d[1] for d in data]
+    report = analyze_residuals(FirstOrderARX(), X, y, max_lag=5)
+    summary = report.summary
+    cross = cross_correlation_test(report.residuals[0], X[0], max_lag=5)
+    nonlinear = nonlinear_correlation_tests(report.residuals[0], X[0], max_lag=5)
+    cramped = {
+        "display.max_rows": 4,
+        "display.min_rows": 2,
+        "display.max_columns": 3,
+        "display.width": 40,
+        "display.max_colwidth": 6,
+    }
+    with pd.option_context(*[item for pair in cramped.items() for item in pair]):
+        for frame in (summary, cross.summary, nonlinear.summary):
+            printed = str(frame)
+            assert "..." not in printed
+            lines = printed.splitlines()
+            assert len(lines) == len(frame) + 1  # the header, then every row
+            assert lines[0].split() == [str(c) for c in frame.columns]
+            name = "test" if "test" in frame else "side"
+            for line, (_, row) in zip(lines[1:], frame.iterrows(), strict=True):
+                for column in (name, "dof", "passed"):
+                    assert str(row[column]) in line.split()
+            assert frame.to_html().count("<tr") == frame._repr_html_().count("<tr")
+        # What is cut from the summary prints whole too.
+        pooled = summary[summary["sequence"] == "pooled"]
+        assert len(str(pooled).splitlines()) == len(pooled) + 1
+    # Still a DataFrame, and a plain one on request.
+    assert isinstance(summary, pd.DataFrame)
+    assert type(pd.DataFrame(summary)) is pd.DataFrame
+    assert summary["passed"].dtype == bool
+
+
 # ----------------------------------------------------------------------------
 # Bad input
 # ----------------------------------------------------------------------------

@@ -12,6 +12,7 @@ from sysid_nn.study import (
     evaluate,
     fit_models,
     generate_data,
+    hysteresis_loops,
     model_specs,
     run_study,
     select_typical,
@@ -160,7 +161,7 @@ def test_existing_output_is_kept_unless_overwrite(tmp_path):
 
 
 def test_failed_run_leaves_nothing(tmp_path, monkeypatch):
-    import sysid_nn.study as study_module
+    import sysid_nn.study._run as study_module
 
     def boom(*args, **kwargs):
         raise RuntimeError("interrupted")
@@ -232,10 +233,8 @@ def test_select_typical():
 
 
 def test_hysteretic_element_reproduces_true_state_from_displacement(study):
-    from sysid_nn.study import _hysteretic_state, hysteresis_loops
-
     test = study.data.test
-    z = _hysteretic_state(test.displacement[0], study.data.oscillator)
+    z = study.data.oscillator.hysteretic_state(test.displacement[0])
     scale = np.max(np.abs(test.hysteretic[0]))
     assert np.max(np.abs(z - test.hysteretic[0])) < 1e-2 * scale
     loops = hysteresis_loops(study.models, study.data, study.evaluation)
@@ -244,3 +243,105 @@ def test_hysteretic_element_reproduces_true_state_from_displacement(study):
     assert set(loops.state) <= {"ISSM (paper)", "ISSM (default)"}
     for label, r in loops.state_correlation.items():
         assert 0 <= r <= 1, label
+
+
+def test_report_states_the_verdicts_of_its_results(study):
+    report = (study.out_dir / "report.md").read_text()
+    by = study.summary.set_index(["model", "mode"])
+    paper = [
+        by.loc[(m, "simulation"), "nrmse_median"] for m in ("tdl_paper", "issm_paper")
+    ]
+    for value in paper:
+        assert f"{value:.4g}" in report
+    simulates = "The paper's networks as published do not simulate unseen"
+    assert (simulates in report) == all(v > 1 for v in paper)
+    rates = by.xs("prediction", level="mode")["whiteness_pass_rate"]
+    none_white = "No model's one-step residuals pass the whiteness test**"
+    assert (none_white in report) == (rates.max() == 0)
+    assert "docs/user_guide/pitfalls.rst" in report
+
+
+def test_verdicts_follow_the_numbers(study):
+    from sysid_nn.study._report import _verdicts
+
+    summary = study.summary.copy()
+    sim = summary["mode"] == "simulation"
+    summary.loc[sim, "nrmse_median"] = 2.0
+    summary["whiteness_pass_rate"] = 0.0
+    text = " ".join(_verdicts(summary))
+    assert "do not simulate unseen realisations" in text
+    assert "No model's one-step residuals pass the whiteness test**" in text
+    assert "unlike the paper's figs 4.3-4.4" in text and "pitfalls.rst" in text
+    summary.loc[sim, "nrmse_median"] = 0.5
+    summary["whiteness_pass_rate"] = 1.0
+    text = " ".join(_verdicts(summary))
+    assert "networks as published simulate unseen realisations" in text
+    assert "Some models' one-step residuals pass" in text
+    assert "unlike the paper" not in text and "100 %" in text
+    # Without the paper's networks there is no comparison with the paper.
+    text = " ".join(_verdicts(summary.query("model == 'linear'")))
+    assert "paper" not in text and "linear (OE) 100 %" in text
+
+
+def _study_figures(study, *names):
+    from sysid_nn.study._figures import _figures
+
+    loops = hysteresis_loops(study.models, study.data, study.evaluation)
+    builders = _figures(study.models, study.data, study.evaluation, loops)
+    return [builders[name]() for name in names]
+
+
+def test_correlation_panels_share_a_lag_range_of_a_natural_period(study):
+    acf, ccf = _study_figures(
+        study,
+        "fig4_3_residual_autocorrelation.png",
+        "fig4_4_residual_cross_correlation.png",
+    )
+    period = study.data.natural_period
+    limits = {ax.get_xlim() for ax in acf.axes}
+    assert len(limits) == 1 and limits.pop()[1] >= period
+    for ax in acf.axes:
+        assert ax.get_lines()[0].get_xdata()[-1] >= period
+    assert len({ax.get_xlim() for ax in ccf.axes}) == 1
+    for ax in ccf.axes:
+        assert ax.get_lines()[0].get_xdata()[0] <= -period
+        legend = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert legend[0] == "excitation F [m/s²]"
+        assert ax.get_xlabel().startswith("lag τ [s]")
+
+
+def test_figures_carry_units_and_one_model_per_loop(study):
+    training, response, stats, loops = _study_figures(
+        study,
+        "fig4_1_training_data.png",
+        "fig4_2_prediction.png",
+        "fig4_7_simulation_error_statistics.png",
+        "hysteresis.png",
+    )
+    assert [ax.get_ylabel() for ax in training.axes] == [
+        "excitation F [m/s²]",
+        "displacement X [m]",
+    ]
+    assert {ax.get_xlabel() for ax in training.axes} == {"time t [s]"}
+    assert {ax.get_ylabel() for ax in response.axes} == {"displacement X [m]"}
+    assert {ax.get_xlabel() for ax in response.axes} == {"time t [s]"}
+    assert stats.axes[0].get_ylabel().startswith("error [m]")
+    shown = [ax for ax in loops.axes if ax.get_visible()]
+    data = hysteresis_loops(study.models, study.data, study.evaluation)
+    assert len(shown) == len(data.force) + len(data.state)
+    for ax in shown:
+        assert len(ax.get_legend().get_texts()) == 2  # the truth and one model
+        assert ax.get_xlabel() == "displacement X [m]"
+        assert ax.get_ylabel().endswith("[m]")
+
+
+def test_pickles_name_the_public_module():
+    import pickle
+
+    from sysid_nn.study import StudyModel
+
+    model = StudyModel("linear", None, ("excitation",), ("displacement",))
+    for obj in (StudyConfig(seed=1), model):
+        dumped = pickle.dumps(obj)
+        assert b"sysid_nn.study" in dumped and b"sysid_nn.study._" not in dumped
+        assert pickle.loads(dumped) == obj

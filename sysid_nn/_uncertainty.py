@@ -1,0 +1,312 @@
+"""Delta-method uncertainty of the recurrent networks' outputs.
+
+At the end of ``fit`` the covariance of the fitted weights is estimated from
+the exact recurrent Jacobian of the final training objective (the free run
+for the simulation focus, the one-step predictor for the prediction focus):
+
+.. math:: C = c \\, A^{+} S A^{+}, \\qquad A = J^T J + \alpha M,
+
+with ``M`` the mask of penalised weights, ``S`` the long-run covariance of
+the gradient terms ``r_t J_t`` (Bartlett kernel, bandwidth from the
+residuals' autocorrelation: residuals of a free run are rarely white) and
+``c`` a degrees-of-freedom correction. For white residuals of variance
+``s^2`` this is the textbook ``s^2 (J^T J)^{-1}``. ``predict`` and
+``simulate`` propagate ``C`` to every sample through the forward
+sensitivities of the run they make, ``var(yhat(t)) = J(t) C J(t)^T``, and add
+the residual variance for a prediction interval. Everything here works in the
+estimators' standardised units and converts to the user's units on the way
+out.
+"""
+
+from __future__ import annotations
+
+import copy
+import warnings
+from dataclasses import dataclass
+from itertools import pairwise
+
+import numpy as np
+
+from sysid_nn._kernels._propagation import row_variances
+
+#: Eigenvalues of the normal matrix (scaled to a unit diagonal) below this
+#: share of the largest are treated as zero (pseudo-inverse): directions the
+#: training data do not determine get no variance instead of an arbitrary
+#: huge one. ``J^T J`` squares the condition number of ``J``, so this drops
+#: directions whose singular value is below 1e-5 of the largest.
+_RCOND = 1e-10
+
+_INTERVALS = ("prediction", "confidence")
+#: A sensitivity ``|d yhat / d w|`` (standardised units) above this along the
+#: training records means that a change of a weight by 1e-9 moves the output
+#: by its standard deviation: the linearisation behind the bands fails. An
+#: ISSM fitted to three oscillator records in the tests reaches 8e6; one at
+#: the edge of stability reached 1e13 (and a band of 1e-14).
+_SENSITIVITY_LIMIT = 1e9
+
+
+@dataclass
+class _Normal:
+    """What the covariance needs from the Jacobian of a training run."""
+
+    #: ``J^T J``.
+    JtJ: np.ndarray
+    #: Long-run covariance of the gradient terms ``r_t J_t`` (Bartlett).
+    meat: np.ndarray
+    #: Residual sum of squares per output.
+    rss: np.ndarray
+    #: Number of modelled rows (time steps).
+    n_rows: int
+    #: Largest ``|d yhat / d w|``.
+    max_sensitivity: float
+    #: Bartlett bandwidth used for ``meat``, in samples.
+    bandwidth: int
+
+
+def _normal_matrix(est, w, data, seg, cols=None) -> _Normal | None:
+    """``J^T J`` of a run and the long-run covariance of its gradient terms.
+
+    The one place where the full Jacobian of the training data is formed;
+    a memory-bounded accumulation can replace it (every term is a sum over
+    rows, or over windows of consecutive rows). Returns ``None`` if the run
+    diverges.
+    """
+    Yhat, J, diverged, _ = est._run(w, data, seg, True)
+    if (diverged >= 0).any():
+        return None
+    if cols is not None:
+        J = J[:, cols]
+    rows = data.modelled
+    R = Yhat[rows] - data.Y[rows]
+    p, n_w = R.shape[1], J.shape[1]
+    # Gradient term of each time step, summed over the outputs.
+    G = (R.reshape(-1, 1) * J).reshape(len(rows), p, n_w).sum(axis=1)
+    lengths = np.diff(data.starts) - data.h
+    bounds = np.concatenate([[0], np.cumsum(lengths)])
+    L = _bandwidth(R, bounds)
+    meat = np.zeros((n_w, n_w))
+    for a, b in pairwise(bounds):
+        meat += _bartlett(G[a:b], L)
+    return _Normal(
+        JtJ=J.T @ J,
+        meat=meat,
+        rss=(R * R).sum(axis=0),
+        n_rows=len(rows),
+        max_sensitivity=float(np.abs(J).max(initial=0.0)),
+        bandwidth=L,
+    )
+
+
+def _bandwidth(R, bounds) -> int:
+    """Bartlett bandwidth from the residuals' lag-one autocorrelation.
+
+    Andrews' (1991) AR(1) plug-in rule, ``1.1447 (a n)^(1/3)`` with ``a =
+    4 rho^2 / ((1 - rho)^2 (1 + rho)^2)`` and ``n`` the mean record length,
+    capped at half the shortest record: about one sample for white
+    residuals, hundreds for the slow drift of a free-run error.
+    """
+    num = den = 0.0
+    for a, b in pairwise(bounds):
+        r = R[a:b]
+        num += float(np.sum(r[1:] * r[:-1]))
+        den += float(np.sum(r * r))
+    rho = min(max(num / den, 0.0), 0.999) if den > 0 else 0.0
+    n = (bounds[-1] - bounds[0]) / max(len(bounds) - 1, 1)
+    alpha = 4 * rho**2 / ((1 - rho) ** 2 * (1 + rho) ** 2)
+    shortest = int(np.min(np.diff(bounds)))
+    return int(min(1.1447 * (alpha * n) ** (1.0 / 3.0), max(shortest // 2, 0)))
+
+
+def _bartlett(G, L) -> np.ndarray:
+    """Long-run covariance ``sum_l (1 - |l| / (L + 1)) sum_t G_t^T G_{t+l}``.
+
+    As the mean outer product of sums over windows of ``L + 1`` consecutive
+    rows (the Bartlett kernel's form), scaled to the record's length.
+    """
+    n = len(G)
+    if n == 0:
+        return np.zeros((G.shape[1], G.shape[1]))
+    width = min(L + 1, n)
+    cs = np.vstack([np.zeros((1, G.shape[1])), np.cumsum(G, axis=0)])
+    B = cs[width:] - cs[:-width]
+    return (B.T @ B) * (n / (len(B) * width))
+
+
+def _pseudo_inverse(M):
+    """Symmetric pseudo-inverse with the :data:`_RCOND` cutoff.
+
+    The cutoff applies to ``M`` scaled to a unit diagonal (as Marquardt's
+    damping does): a weight the outputs are very sensitive to must not push
+    the well-determined ones below the cutoff. Weights with a zero column
+    get no variance.
+    """
+    d = np.sqrt(np.diag(M))
+    live = d > 0
+    D = np.where(live, 1.0 / np.where(live, d, 1.0), 0.0)
+    lam, V = np.linalg.eigh(D[:, None] * M * D[None, :])
+    top = lam.max(initial=0.0)
+    keep = lam > _RCOND * top if top > 0 else np.zeros(len(lam), dtype=bool)
+    inv = (V[:, keep] / lam[keep]) @ V[:, keep].T
+    return D[:, None] * inv * D[None, :]
+
+
+def _delta_covariance(normal: _Normal, penalty, p: int):
+    """``(cov, n_eff)``: sandwich covariance and effective number of weights.
+
+    ``cov = c A^+ S A^+`` with ``A = J^T J + alpha M``, ``S`` the long-run
+    covariance of the gradient terms and ``c`` the small-sample correction
+    ``N p / (N p - n_eff)``. For white residuals of constant variance
+    ``s^2``, ``S = s^2 J^T J`` and ``cov = s^2 A^+`` (for ``alpha = 0``).
+    """
+    inv = _pseudo_inverse(normal.JtJ + np.diag(penalty))
+    n_eff = float(np.sum(inv * normal.JtJ))  # trace(inv @ JtJ), both symmetric
+    n_res = normal.n_rows * p
+    cov = inv @ normal.meat @ inv * (n_res / max(n_res - n_eff, 1.0))
+    return cov, n_eff
+
+
+def _residual_variance(normal: _Normal, n_eff, p):
+    """Residual variance per output, corrected for ``n_eff`` fitted weights."""
+    return normal.rss / max(normal.n_rows - n_eff / p, 1.0)
+
+
+def _realisation_map(est) -> np.ndarray:
+    """Jacobian of an ``init="tdl"`` ISSM's weights by its TDL's weights.
+
+    The realisation is affine in the TDL's weights, so unit steps give it
+    exactly.
+    """
+    tdl = copy.copy(est.tdl_)
+    w0 = tdl.coefs_
+    base, _ = est._realise_tdl(tdl)
+    G = np.empty((len(base), len(w0)))
+    for j in range(len(w0)):
+        tdl.coefs_ = w0.copy()
+        tdl.coefs_[j] += 1.0
+        G[:, j] = est._realise_tdl(tdl)[0] - base
+    return G
+
+
+def fit_covariance(est, train) -> None:
+    """Store ``coefs_covariance_`` and the noise variances on a fitted ``est``.
+
+    * The covariance is the sandwich of :func:`_delta_covariance` for the
+      final training objective, pooled over outputs in standardised units.
+    * An ISSM started from a TDL network (``init="tdl"``) was trained as
+      that network: its covariance is the TDL's, mapped through the exact
+      (affine) realisation.
+    * Weights on the innovations that the final objective does not see
+      (simulation focus, TDL start: they were refitted on the one-step loss
+      with the others fixed) get the covariance of that refit, from the
+      one-step Jacobian, uncorrelated with the others.
+    """
+    w, p = est.coefs_, est.n_outputs_
+    n_w = len(w)
+    mask = est._penalty_mask().astype(np.float64)
+    alpha = float(est.alpha)
+    free = _normal_matrix(est, w, train, est._final_segment())
+    one = _normal_matrix(est, w, train, 1)
+    nan = np.full(p, np.nan)
+    if free is None or (getattr(est, "init", None) == "tdl" and one is None):
+        est.coefs_covariance_ = np.full((n_w, n_w), np.nan)
+        est.n_effective_params_ = np.nan
+        est.noise_variance_ = nan
+        est.one_step_noise_variance_ = nan
+        est._noise_units = (nan, nan)
+        est._cov_root = np.full((1, n_w), np.nan)
+        return
+    if getattr(est, "init", None) == "tdl":
+        tdl = est.tdl_
+        G = _realisation_map(est)
+        # The TDL's covariance already holds its own residual variance.
+        cov = G @ tdl.coefs_covariance_ @ G.T
+        n_eff = float(tdl.n_effective_params_)
+    else:
+        cov, n_eff = _delta_covariance(free, alpha * mask, p)
+    if free.max_sensitivity > _SENSITIVITY_LIMIT:
+        warnings.warn(
+            f"The outputs of this {type(est).__name__} are extremely sensitive to "
+            f"its weights along the training records (|d yhat / d w| up to "
+            f"{free.max_sensitivity:.1e} in standardised units): its recurrence "
+            "is at the edge of stability there, and the bands of return_std=True, "
+            "which linearise the outputs in the weights, are unreliable. Check "
+            "them with sysid_nn.uncertainty.ensemble_std.",
+            UserWarning,
+            stacklevel=4,
+        )
+    innovations = getattr(est, "_innovation_index", None)
+    if innovations is not None and est._final_segment() != 1 and one is not None:
+        idx = innovations()
+        cov_k, n_k = _delta_covariance(
+            _normal_matrix(est, w, train, 1, idx), alpha * mask[idx], p
+        )
+        cov[idx, :] = 0.0
+        cov[:, idx] = 0.0
+        cov[np.ix_(idx, idx)] = cov_k
+        n_eff += n_k
+    cov = 0.5 * (cov + cov.T)
+    est.coefs_covariance_ = cov
+    est.n_effective_params_ = n_eff
+    # Kept in standardised units too: squared user units may overflow.
+    est._noise_units = (
+        _residual_variance(free, n_eff, p),
+        _residual_variance(one, n_eff, p) if one is not None else nan,
+    )
+    with np.errstate(over="ignore"):
+        scale2 = est._y_scale**2
+        est.noise_variance_ = est._noise_units[0] * scale2
+        est.one_step_noise_variance_ = est._noise_units[1] * scale2
+    est._cov_root = _square_root(cov)
+
+
+def _square_root(cov):
+    """``L^T`` with ``C = L L^T``, so that every band costs one product.
+
+    Computed on ``C`` scaled to a unit diagonal: the variances of the weights
+    span many decades, and each direction kept counts on the data it came
+    from. Only eigenvalues at rounding level are dropped.
+    """
+    d = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    live = d > 0
+    D = np.where(live, 1.0 / np.where(live, d, 1.0), 0.0)
+    lam, V = np.linalg.eigh(D[:, None] * cov * D[None, :])
+    keep = lam > len(lam) * np.finfo(float).eps * lam.max(initial=0.0)
+    root = d[:, None] * V[:, keep] * np.sqrt(lam[keep])
+    return np.ascontiguousarray(root.T)
+
+
+def check_interval(interval) -> None:
+    """Reject an unknown ``interval`` argument with the choices."""
+    if interval not in _INTERVALS:
+        raise ValueError(
+            f"interval must be 'prediction' (a new measurement: weights and "
+            f"noise) or 'confidence' (the model output: weights only); got "
+            f"{interval!r}."
+        )
+
+
+def output_std(est, Yhat, J, data, as_list, y_1d, interval, one_step=False):
+    """Standard deviation of every modelled sample, shaped like the output.
+
+    ``J`` holds ``d yhat / d w`` of the modelled rows (standardised units),
+    as returned with ``Yhat`` by ``est._run``. Rows after a divergence are
+    NaN. ``one_step`` chooses the one-step residual variance as the noise
+    of a prediction interval.
+    """
+    check_interval(interval)
+    p = est.n_outputs_
+    rows = data.modelled
+    var = np.empty(len(J))
+    row_variances(J, est._cov_root, var)
+    var = var.reshape(len(rows), p)
+    if interval == "prediction":
+        var = var + est._noise_units[1 if one_step else 0]
+    std = np.sqrt(var) * est._y_scale
+    std[np.isnan(Yhat[rows]).any(axis=1)] = np.nan
+    out, k = [], 0
+    for a, b in pairwise(data.starts):
+        n = b - a - data.h
+        block = std[k : k + n]
+        out.append(block[:, 0] if y_1d else block)
+        k += n
+    return out if as_list else out[0]

@@ -1,0 +1,274 @@
+"""The study's figures (figs 4.1-4.7 and the hysteresis loops)."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+from sklearn.utils import Bunch
+
+from sysid_nn.plotting import panel_figure
+from sysid_nn.study._models import StudyModel
+
+
+def _label(data: Bunch, field: str) -> str:
+    """Axis label of a record field: its name and, when known, its unit."""
+    name = data.get("names", {}).get(field, field)
+    unit = data.get("units", {}).get(field)
+    return f"{name} [{unit}]" if unit else name
+
+
+def _model_grid(model: StudyModel, n: int, dt: float) -> np.ndarray:
+    return np.arange(n) * dt * model.step
+
+
+def _response_figure(models, data, evaluation, mode, title) -> Any:
+    from sysid_nn.plotting import plot_response
+
+    fig, axes = panel_figure(len(models))
+    for ax, (name, model) in zip(axes, models.items(), strict=True):
+        (_,), (y,) = model.arrays(data.test, [0])
+        y0 = y if y.ndim == 1 else y[:, 0]
+        e = evaluation.errors[name, mode][0]
+        t = _model_grid(model, y0.size, data.dt)
+        ylabel = _label(data, model.outputs[0])
+        plot_response(t, y0, y0 - e, label=model.label, ylabel=ylabel, ax=ax)
+        ax.set_title(f"{title}: {model.label}, test realisation 0", fontsize=9)
+    return fig
+
+
+def _lag_span(models, data, evaluation) -> float:
+    """Lag range in seconds shared by every correlation panel.
+
+    The tests' largest lag on the coarsest model grid, and at least one
+    natural period when the system's is known, so that a period's worth of
+    residual correlation is in view whatever the model's sampling step.
+    """
+    span = max(evaluation.max_lag * data.dt * m.step for m in models.values())
+    return max(span, data.get("natural_period", 0.0))
+
+
+def _correlation_figure(models, data, evaluation, kind) -> Any:
+    from sysid_nn.plotting import plot_autocorrelation, plot_cross_correlation
+    from sysid_nn.residuals import cross_correlation_test, whiteness_test
+
+    span = _lag_span(models, data, evaluation)
+    fig, axes = panel_figure(len(models))
+    for ax, (name, model) in zip(axes, models.items(), strict=True):
+        e = evaluation.errors[name, "prediction"][0]
+        if not np.all(np.isfinite(e)):
+            ax.text(0.5, 0.5, f"{model.label}: prediction diverged", ha="center")
+            continue
+        step = data.dt * model.step
+        lags = int(np.ceil(span / step - 1e-9))
+        tested = evaluation.max_lag * step
+        ax.axvspan(0 if kind == "acf" else -tested, tested, color="0.92", zorder=0)
+        if kind == "acf":
+            found = whiteness_test(e, lags, evaluation.alpha)
+            plot_autocorrelation(found, dt=step, title=model.label, ax=ax)
+            ax.set_xlim(-0.02 * span, 1.02 * span)
+        else:
+            (X,), _ = model.arrays(data.test, [0])
+            found = cross_correlation_test(e, X, lags, evaluation.alpha)
+            names = [_label(data, field) for field in model.inputs]
+            plot_cross_correlation(
+                found, dt=step, input_names=names, title=model.label, ax=ax
+            )
+            ax.set_xlim(-1.02 * span, 1.02 * span)
+    period = data.get("natural_period")
+    fig.suptitle(
+        f"One-step prediction errors, test realisation 0: lags up to {span:.3g} s"
+        + (f" (natural period {period:.3g} s)" if period else "")
+        + f";\nshaded: the lags of the tables' tests (up to {evaluation.max_lag} "
+        "samples of each model)",
+        fontsize=9,
+    )
+    return fig
+
+
+def _statistics_figure(evaluation, mode, title, unit) -> Any:
+    from sysid_nn.plotting import plot_error_statistics
+
+    fig, (ax,) = panel_figure(1, row_height=3.6)
+    plot_error_statistics(evaluation.statistics[mode], unit=unit, title=title, ax=ax)
+    return fig
+
+
+def hysteresis_loops(
+    models: Mapping[str, StudyModel], data: Bunch, evaluation: Bunch
+) -> Bunch:
+    """Restoring force and hysteretic state against displacement, test record 0.
+
+    The truth is ``g = alpha X + (1 - alpha) Z`` (eq. 14) against ``X``. Each
+    model is drawn along its simulated displacement ``X_m``: the restoring
+    force ``alpha X_m + (1 - alpha) Z(X_m)`` that the true hysteretic element
+    (eq. 15, rate-independent) develops under that displacement history, so
+    loops compare at a glance whatever the model's sampling step. Models
+    with unmeasured states (the ISSMs) are also drawn by their estimated
+    states, mapped onto ``Z`` by least squares (the states' coordinates are
+    the network's own; ``|r|`` says how well they track ``Z``).
+
+    Parameters
+    ----------
+    models : dict of str to StudyModel
+        The fitted models, e.g. from :func:`fit_models`.
+    data : Bunch
+        From :func:`generate_data`.
+    evaluation : Bunch
+        From :func:`evaluate`.
+
+    Returns
+    -------
+    Bunch
+        ``truth``: ``(X, g, Z)``; ``force``: ``{label: (X_m, g_m)}``;
+        ``state``: ``{label: (X_m, Z_m)}`` for models with states;
+        ``state_correlation``: ``{label: |r|}`` of ``Z_m`` and ``Z``.
+
+    Examples
+    --------
+    >>> from sysid_nn.study import StudyConfig, evaluate, fit_models, generate_data
+    >>> from sysid_nn.study import hysteresis_loops
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2, max_lag=10,
+    ...                      n_candidates=3, estimator_params={"all": {"n_init": 1}})
+    >>> data = generate_data(config)
+    >>> models = fit_models(data, config)
+    >>> loops = hysteresis_loops(models, data, evaluate(models, data, config))
+    >>> sorted(loops.force), loops.state
+    (['linear (OE)'], {})
+    """
+    alpha = data.oscillator.get_params()["alpha"]
+    x, z = data.test.displacement[0], data.test.hysteretic[0]
+    out = Bunch(truth=(x, alpha * x + (1 - alpha) * z, z), force={}, state={})
+    out.state_correlation = {}
+    for name, model in models.items():
+        (X,), _ = model.arrays(data.test, [0])
+        cut = slice(None, None, model.step)
+        e = evaluation.errors[name, "simulation"][0]
+        x_m = x[cut] - e
+        if not np.all(np.isfinite(x_m)):
+            continue
+        z_x = data.oscillator.hysteretic_state(x_m)
+        out.force[model.label] = (x_m, alpha * x_m + (1 - alpha) * z_x)
+        if hasattr(model.estimator, "predict_states"):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                states = model.estimator.predict_states(X).states
+            hidden = states[:, len(model.outputs) :]
+            design = np.column_stack([np.ones(len(hidden)), hidden])
+            coef = np.linalg.lstsq(design, z[cut], rcond=None)[0]
+            z_m = design @ coef
+            out.state[model.label] = (x_m, z_m)
+            out.state_correlation[model.label] = float(
+                abs(np.corrcoef(z_m, z[cut])[0, 1])
+            )
+    return out
+
+
+def _hysteresis_figure(loops: Bunch, data: Bunch) -> Any:
+    from sysid_nn.plotting import plot_hysteresis
+
+    x, g, z = loops.truth
+    unit = data.units["displacement"]
+    force = f"restoring term g = αX + (1-α)Z [{unit}]"
+    panels = [
+        (f"{label}: g along its free run", "true g", force, g, xy)
+        for label, xy in loops.force.items()
+    ]
+    panels += [
+        (
+            f"{label}: estimated hidden state, |r| = "
+            f"{loops.state_correlation[label]:.2f}",
+            "true Z",
+            _label(data, "hysteretic"),
+            z,
+            xy,
+        )
+        for label, xy in loops.state.items()
+    ]
+    fig, axes = panel_figure(max(1, -(-len(panels) // 2)), n_cols=2, width=10.0)
+    for ax, (title, truth, ylabel, y, xy) in zip(axes, panels, strict=False):
+        plot_hysteresis(
+            x,
+            y,
+            label=truth,
+            models={title.split(":")[0]: xy},
+            xlabel=_label(data, "displacement"),
+            ylabel=ylabel,
+            title=title,
+            ax=ax,
+        )
+        ax.title.set_fontsize(9)
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
+    fig.suptitle(
+        "Hysteresis on test realisation 0: the truth (grey) and each model along "
+        "its own free run; hidden states mapped onto Z by least squares",
+        fontsize=9,
+    )
+    return fig
+
+
+#: Figure files of a study directory, in the paper's order.
+FIGURES = {
+    "fig4_1_training_data.png": "Training data (fig. 4.1)",
+    "fig4_2_prediction.png": "One-step prediction on a test realisation (fig. 4.2)",
+    "fig4_3_residual_autocorrelation.png": (
+        "Autocorrelation of prediction errors (fig. 4.3)"
+    ),
+    "fig4_4_residual_cross_correlation.png": (
+        "Cross-correlation of prediction errors and input (fig. 4.4)"
+    ),
+    "fig4_5_prediction_error_statistics.png": (
+        "μ_Ns and σ_Ns of prediction errors (fig. 4.5)"
+    ),
+    "fig4_6_simulation.png": "Free-run simulation on a test realisation (fig. 4.6)",
+    "fig4_7_simulation_error_statistics.png": (
+        "μ_Ns and σ_Ns of simulation errors (fig. 4.7)"
+    ),
+    "hysteresis.png": "Hysteresis loops: truth and models' simulations",
+}
+
+
+def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
+    """Figure builders by file name; those needing absent data are left out."""
+    from sysid_nn.plotting import plot_records
+
+    def training() -> Any:
+        _, axes = panel_figure(2)
+        t = np.arange(data.train.excitation.shape[1]) * data.dt
+        return plot_records(
+            t,
+            data.train.excitation,
+            data.train.displacement,
+            excitation_label=_label(data, "excitation"),
+            displacement_label=_label(data, "displacement"),
+            ax=axes,
+        )
+
+    first = next(iter(models.values())).outputs[0]
+    unit = data.get("units", {}).get(first)
+
+    names = list(FIGURES)
+    builders = {
+        names[1]: lambda: _response_figure(
+            models, data, evaluation, "prediction", "Prediction"
+        ),
+        names[2]: lambda: _correlation_figure(models, data, evaluation, "acf"),
+        names[3]: lambda: _correlation_figure(models, data, evaluation, "ccf"),
+        names[4]: lambda: _statistics_figure(
+            evaluation, "prediction", FIGURES[names[4]], unit
+        ),
+        names[5]: lambda: _response_figure(
+            models, data, evaluation, "simulation", "Simulation"
+        ),
+        names[6]: lambda: _statistics_figure(
+            evaluation, "simulation", FIGURES[names[6]], unit
+        ),
+    }
+    if "train" in data:
+        builders[names[0]] = training
+    if loops is not None:
+        builders[names[7]] = lambda: _hysteresis_figure(loops, data)
+    return {name: builders[name] for name in names if name in builders}

@@ -1,0 +1,385 @@
+"""The study's ``report.md``: tables laid out as the paper's figures."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import platform
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from sklearn.utils import Bunch
+
+import sysid_nn
+from sysid_nn.study._config import _QUICK_PARAMS, StudyConfig
+from sysid_nn.study._figures import FIGURES
+from sysid_nn.study._models import StudyModel
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (float, np.floating)):
+        return "diverged" if np.isnan(value) else f"{value:.4g}"
+    return str(value)
+
+
+def _md_table(frame: pd.DataFrame) -> str:
+    """GitHub markdown table of a frame (index dropped)."""
+    head = "| " + " | ".join(map(str, frame.columns)) + " |"
+    rule = "|" + "|".join("---" for _ in frame.columns) + "|"
+    body = [
+        "| " + " | ".join(_fmt(v) for v in row) + " |"
+        for row in frame.itertuples(index=False)
+    ]
+    return "\n".join([head, rule, *body])
+
+
+def _percent(rate: float) -> str:
+    return f"{100 * rate:.0f} %"
+
+
+def _glance(summary: pd.DataFrame) -> pd.DataFrame:
+    """Rows = models, columns = the numbers a reader compares with the paper."""
+    by = summary.set_index(["model", "mode"])
+    linear = by["nrmse_median"].get(("linear", "simulation"))
+    rows = []
+    for name in dict.fromkeys(summary["model"]):
+        p, s = by.loc[(name, "prediction")], by.loc[(name, "simulation")]
+        row = {
+            "model": p["label"],
+            "NRMSE pred. (median)": p["nrmse_median"],
+            "NRMSE sim. (median)": s["nrmse_median"],
+        }
+        if linear is not None:
+            row["sim. / linear"] = s["nrmse_median"] / linear
+        row |= {
+            "μ_Ns pred.": p["mu_Ns"],
+            "σ_Ns pred.": p["sigma_Ns"],
+            "μ_Ns sim.": s["mu_Ns"],
+            "σ_Ns sim.": s["sigma_Ns"],
+            "white (pred.)": _percent(p["whiteness_pass_rate"]),
+            "uncorrelated with input (pred.)": _percent(p["cross_positive_pass_rate"]),
+            "diverged (pred./sim.)": (
+                f"{p['n_divergent']}/{s['n_divergent']} of {s['n_realizations']}"
+            ),
+        }
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _mode_table(summary: pd.DataFrame, mode: str) -> pd.DataFrame:
+    cols = {
+        "label": "model",
+        "n_realizations": "N_s",
+        "nrmse_median": "NRMSE median",
+        "nrmse_mean": "NRMSE mean",
+        "fit_percent_median": "fit % median",
+        "mu_Ns": "μ_Ns (eq. 19)",
+        "sigma_Ns": "σ_Ns (eq. 20)",
+        "whiteness_pass_rate": "whiteness passed",
+        "cross_positive_pass_rate": "cross τ>0 passed",
+        "cross_negative_pass_rate": "cross τ<0 passed",
+    }
+    frame = summary.query("mode == @mode")[list(cols)].rename(columns=cols)
+    for c in ("whiteness passed", "cross τ>0 passed", "cross τ<0 passed"):
+        frame[c] = frame[c].map(_percent)
+    return frame
+
+
+def _non_default_params(estimator: Any) -> str:
+    defaults = type(estimator)().get_params()
+    skip = {"random_state", "n_jobs", "verbose"}
+    changed = {
+        k: v
+        for k, v in estimator.get_params().items()
+        if k not in skip and v != defaults[k]
+    }
+    return ", ".join(f"{k}={v!r}" for k, v in changed.items()) or "defaults"
+
+
+def _versions() -> str:
+    names = ["numpy", "scipy", "scikit-learn", "statsmodels", "pandas", "numba"]
+    names += ["joblib", "matplotlib", "dask", "distributed"]
+    found = [f"sysid_nn {sysid_nn.__version__}"]
+    for name in names:
+        with contextlib.suppress(metadata.PackageNotFoundError):
+            found.append(f"{name} {metadata.version(name)}")
+    return ", ".join(found)
+
+
+def _machine() -> str:
+    return (
+        f"{platform.platform()}, Python {platform.python_version()}, "
+        f"{os.cpu_count()} logical CPUs ({platform.machine()})"
+    )
+
+
+# Where the user guide explains the verdicts below.
+_PITFALLS = (
+    "the user guide's *Known pitfalls of the hysteretic oscillator problem* "
+    "(`docs/user_guide/pitfalls.rst`, section \"The paper's networks as "
+    'published")'
+)
+_PAPER = ("tdl_paper", "issm_paper")
+
+
+def _verdicts(summary: pd.DataFrame) -> list[str]:
+    """Plain statements, from the computed results, that a reader must not miss.
+
+    Whether the paper's networks simulate unseen realisations (median free-run
+    NRMSE at most 1, i.e. better than the displacement's mean) and which
+    models' one-step residuals pass the whiteness test.
+    """
+    by = summary.set_index(["model", "mode"])
+    lines = []
+    paper = [m for m in _PAPER if (m, "simulation") in by.index]
+    if paper:
+        sim = {m: by.loc[(m, "simulation"), "nrmse_median"] for m in paper}
+        failing = [m for m in paper if not sim[m] <= 1]  # a NaN fails too
+        numbers = ", ".join(
+            f"{by.loc[(m, 'simulation'), 'label']} {_fmt(sim[m])}" for m in paper
+        )
+        if len(failing) == len(paper):
+            head = "The paper's networks as published do not simulate"
+        elif failing:
+            head = "Not every one of the paper's networks as published simulates"
+        else:
+            head = "The paper's networks as published simulate"
+        lines.append(
+            f"**{head} unseen realisations**: median free-run NRMSE {numbers} "
+            "(above 1 is worse than the displacement's mean)."
+        )
+    pred = summary.query("mode == 'prediction'")
+    n = int(pred["n_realizations"].max())
+    rates = pred["whiteness_pass_rate"]
+    listed = ", ".join(
+        f"{r.label} {_percent(r.whiteness_pass_rate)}" for r in pred.itertuples()
+    )
+    if rates.max() == 0:
+        head = "No model's one-step residuals pass the whiteness test"
+    elif rates.max() < 0.5:
+        head = (
+            "No model's one-step residuals pass the whiteness test on most realisations"
+        )
+    else:
+        head = "Some models' one-step residuals pass the whiteness test"
+    text = f"**{head}** (share of the {n} test realisations: {listed})"
+    if paper and rates.max() < 0.5:
+        text += (
+            ", unlike the paper's figs 4.3-4.4, where the prediction errors of "
+            "both networks are white"
+        )
+    lines.append(text + ".")
+    if paper:
+        lines.append(f"Why: see {_PITFALLS}.")
+    return lines
+
+
+def _findings(summary: pd.DataFrame) -> list[str]:
+    sim = summary.query("mode == 'simulation'").set_index("model")
+    lines = []
+    best = sim["nrmse_median"].idxmin()
+    lines.append(
+        f"Best simulator on unseen realisations: {sim.loc[best, 'label']} "
+        f"(median free-run NRMSE {_fmt(sim.loc[best, 'nrmse_median'])})."
+    )
+    if {"tdl_paper", "issm_paper"} <= set(sim.index):
+        tdl, issm = sim.loc["tdl_paper", "sigma_Ns"], sim.loc["issm_paper", "sigma_Ns"]
+        better = "TDL" if tdl < issm else "ISSM"
+        lines.append(
+            f"Paper's networks in simulation: σ_Ns = {_fmt(tdl)} (TDL) against "
+            f"{_fmt(issm)} (ISSM); the smaller is the {better}'s "
+            "(the paper found the TDL's smaller, fig. 4.7)."
+        )
+    return lines
+
+
+def write_report(
+    path: str | os.PathLike,
+    summary: pd.DataFrame,
+    *,
+    title: str,
+    setup: Sequence[str],
+    models: Mapping[str, StudyModel],
+    figures: Sequence[str] = (),
+    extra: Mapping[str, Sequence[str]] | None = None,
+) -> None:
+    """Write ``report.md``: verdicts, setup, tables laid out as the paper's figures.
+
+    The report opens with plain statements derived from ``summary``: whether
+    the paper's networks (when present) simulate unseen realisations
+    (median free-run NRMSE at most 1) and how often each model's one-step
+    residuals pass the whiteness test, compared with the paper's figs 4.3-4.4.
+
+    Parameters
+    ----------
+    path : path-like
+        File to write.
+    summary : pandas.DataFrame
+        From :func:`summarize`.
+    title : str
+        First heading.
+    setup : sequence of str
+        Bullet lines of the setup section (seeds, data, parallelism, ...).
+    models : dict of str to StudyModel
+        Fitted models; their non-default parameters and fit times are listed.
+    figures : sequence of str
+        Figure file names present next to the report (keys of ``FIGURES``).
+    extra : dict of str to sequence of str, optional
+        Further sections, heading to lines.
+
+    Examples
+    --------
+    >>> from sysid_nn.study import StudyConfig, fit_models, generate_data
+    >>> from sysid_nn.study import evaluate, summarize, write_report
+    >>> import tempfile, pathlib
+    >>> config = StudyConfig(models=("linear",), n_samples=600, n_test=2, max_lag=10,
+    ...                      n_candidates=3, estimator_params={"all": {"n_init": 1}})
+    >>> data = generate_data(config)
+    >>> models = fit_models(data, config)
+    >>> summary = summarize(evaluate(models, data, config), models)
+    >>> path = pathlib.Path(tempfile.mkdtemp()) / "report.md"
+    >>> write_report(path, summary, title="Tiny study", setup=["seed 0"],
+    ...              models=models)
+    >>> path.read_text().splitlines()[0]
+    '# Tiny study'
+    """
+    has = set(figures)
+    rows = []
+    for m in models.values():
+        est = m.estimator
+        rows.append(
+            {
+                "model": m.label,
+                "estimator": type(est).__name__,
+                "sees": f"{', '.join(m.inputs)} -> {', '.join(m.outputs)}, every "
+                f"{m.step}. sample"
+                if m.step > 1
+                else f"{', '.join(m.inputs)} -> {', '.join(m.outputs)}",
+                "parameters": _non_default_params(est),
+                "iterations": getattr(est, "n_iter_", ""),
+                "fit time [s]": round(float(getattr(est, "fit_time_", np.nan)), 1),
+            }
+        )
+    lines = [f"# {title}", ""]
+    lines += ["## Results at a glance", ""]
+    lines += [f"- {line}" for line in _verdicts(summary)] + [""]
+    lines += [_md_table(_glance(summary)), ""]
+    lines += [
+        "NRMSE: root-mean-square error of the displacement over its standard "
+        "deviation (0 perfect, 1 no better than its mean); `sim. / linear`: "
+        "median free-run NRMSE relative to the linear baseline. μ_Ns and σ_Ns "
+        "(eq. 19-20) are in the displacement's units, averaged over the N_s "
+        "test realisations as in figs 4.5 and 4.7. Residual tests at the 95 % "
+        "level on every realisation (figs 4.3-4.4).",
+        "",
+    ]
+    if "issm_paper" in models or "tdl_paper" in models:
+        lines += [
+            "The paper (figs 4.5, 4.7) shows bars for its TDL and ISSM only: small "
+            "differences between the two in prediction, a smaller σ_Ns for the TDL "
+            'in simulation ("the TDL network seems to be a better simulator"), '
+            "and prediction errors that pass the whiteness and cross-correlation "
+            "tests (figs 4.3-4.4).",
+            "",
+        ]
+    lines += [f"- {line}" for line in _findings(summary)] + [""]
+    lines += ["## Setup", ""] + [f"- {line}" for line in setup] + [""]
+    first = next(iter(FIGURES))
+    if first in has:
+        lines += [f"![{FIGURES[first]}]({first})", ""]
+    lines += ["### Models", "", _md_table(pd.DataFrame(rows)), ""]
+    for heading, mode, figs in (
+        ("One-step prediction (section 4.3)", "prediction", [1, 2, 3, 4]),
+        ("Free-run simulation (section 4.4)", "simulation", [5, 6]),
+    ):
+        lines += [f"## {heading}", "", _md_table(_mode_table(summary, mode)), ""]
+        for i in figs:
+            name = list(FIGURES)[i]
+            if name in has:
+                lines += [f"![{FIGURES[name]}]({name})", ""]
+        if mode == "simulation":
+            lines += [
+                "Free-run residuals are coloured even for a good simulator (they "
+                "accumulate); the whiteness test is designed for one-step "
+                "prediction errors.",
+                "",
+            ]
+    for heading, body in (extra or {}).items():
+        lines += [f"## {heading}", "", *body, ""]
+    lines += ["## Files", ""]
+    lines += ["- `results.csv`: one row per realisation, model and mode."]
+    lines += ["- `summary.csv`: one row per model and mode (the tables above)."]
+    lines += [f"- `{name}`: {FIGURES[name]}" for name in figures]
+    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _parallel_line(config: StudyConfig, scheduler: str | None) -> str:
+    where = f"dask scheduler {scheduler}" if scheduler else "local joblib"
+    return f"Parallel: {where}, n_jobs={config.n_jobs} (evaluation and restarts)."
+
+
+def _study_setup(
+    config: StudyConfig, data: Bunch, scheduler: str | None, timings: Mapping
+) -> list[str]:
+    peaks = data.candidate_peaks
+    chosen = ", ".join(f"#{i} (peak |X| = {peaks[i]:.4g} m)" for i in data.train_index)
+    test_peak = np.mean(np.max(np.abs(data.test.displacement), axis=1))
+    z0 = data.oscillator.get_params()["z0"]
+    settings = {k: v for k, v in asdict(config).items() if k != "estimator_params"}
+    lines = [
+        f"Configuration: {settings}"
+        + (
+            f", estimator overrides {dict(config.estimator_params)}"
+            if config.estimator_params
+            else ""
+        )
+        + (f", quick-run training settings {_QUICK_PARAMS}" if config.quick else "")
+        + ".",
+        f"Seeds (from seed={config.seed}): {data.seeds}.",
+        f"Oscillator and excitation: the paper's parameters "
+        f"{data.oscillator.get_params()}, r0 = {data.r0:.6g} (calibrated so that "
+        f"E[max|X|] = 2 z0 = {2 * z0:g} m).",
+        f"Records: {config.n_samples} samples at dt = {config.dt:g} s.",
+        f"Training: {config.n_train} record(s) of typical amplitude, the "
+        f"candidate(s) nearest the median peak |X| = {np.median(peaks):.4g} m "
+        f"of {peaks.size} candidates: {chosen}.",
+        f"Validation: {config.n_val} record(s) (early stopping, restart selection).",
+        f"Test: N_s = {config.test_size} unseen realisations (mean peak |X| = "
+        f"{test_peak:.4g} m).",
+        _parallel_line(config, scheduler),
+        f"Software: {_versions()}.",
+        f"Machine: {_machine()}.",
+        "Wall time: "
+        + ", ".join(f"{k} {v:.1f} s" for k, v in timings.items())
+        + f" (total {sum(timings.values()):.1f} s before the report).",
+    ]
+    warned = {n: w for n, w in data.get("fit_warnings", {}).items() if w}
+    lines += [f"Warnings while fitting {n}: {'; '.join(w)}" for n, w in warned.items()]
+    return lines
+
+
+def _hysteresis_lines(loops: Bunch) -> list[str]:
+    lines = ["![Hysteresis loops](hysteresis.png)", ""]
+    if loops.state_correlation:
+        lines.append(
+            "Estimated unmeasured ISSM states against the true hysteretic Z "
+            "(free run, test realisation 0, affine map fitted for display): "
+            + ", ".join(
+                f"{k} |r| = {v:.3f}" for k, v in loops.state_correlation.items()
+            )
+            + "."
+        )
+    lines.append(
+        "One panel per model: the restoring term g = αX + (1-α)Z (eq. 14) that "
+        "the true hysteretic element (eq. 15) develops along the model's "
+        "simulated displacement, over the truth in grey; one panel per ISSM for "
+        "its estimated hidden state against its simulated displacement."
+    )
+    return lines

@@ -1,0 +1,311 @@
+"""Running a study or a validation end to end into an output directory."""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import secrets
+import shutil
+import tempfile
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from joblib import parallel_backend
+from sklearn.utils import Bunch
+
+from sysid_nn.study._config import StudyConfig
+from sysid_nn.study._data import generate_data
+from sysid_nn.study._figures import _figures, hysteresis_loops
+from sysid_nn.study._models import StudyModel, fit_models
+from sysid_nn.study._progress import _progress
+from sysid_nn.study._report import (
+    _hysteresis_lines,
+    _machine,
+    _study_setup,
+    _versions,
+    write_report,
+)
+from sysid_nn.study._scoring import evaluate, summarize
+
+
+@contextlib.contextmanager
+def _staged_directory(out_dir: str | os.PathLike, overwrite: bool) -> Iterator[Path]:
+    """A temporary directory next to ``out_dir``, moved in place on success.
+
+    An interrupted or failed run leaves nothing behind; an existing
+    ``out_dir`` is replaced only with ``overwrite=True``.
+    """
+    out = Path(out_dir)
+    if out.exists() and not overwrite:
+        raise FileExistsError(
+            f"output directory {str(out)!r} exists; pass overwrite=True to "
+            "replace it, or choose another directory."
+        )
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except FileExistsError as exc:  # a file where a parent directory should be
+        raise NotADirectoryError(
+            errno.ENOTDIR, "a file is in the way of the output directory", exc.filename
+        ) from None
+    # mkdir (not mkdtemp, which makes it private) so the result gets the
+    # usual permissions; the random suffix keeps concurrent runs apart.
+    tmp = out.parent / f".{out.name}.partial-{secrets.token_hex(6)}"
+    tmp.mkdir()
+    try:
+        yield tmp
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.old-", dir=out.parent))
+            os.replace(out, old / out.name)
+            os.replace(tmp, out)
+            shutil.rmtree(old)
+        else:
+            os.replace(tmp, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _joblib_backend(scheduler: str | None) -> Iterator[None]:
+    if scheduler is None:
+        yield
+        return
+    try:
+        from dask.distributed import Client
+    except ImportError as exc:  # pragma: no cover - the extra is not installed
+        raise ImportError(
+            "scheduler needs dask.distributed; install it with "
+            "`pip install sysid_nn[distributed]`."
+        ) from exc
+    try:
+        client = Client(scheduler)
+    except OSError as exc:  # unreachable or refusing: say which address
+        raise ConnectionError(
+            f"cannot connect to the dask scheduler {scheduler!r}: {exc}"
+        ) from exc
+    with client, parallel_backend("dask"):
+        yield
+
+
+def _write_outputs(
+    tmp: Path,
+    models: Mapping[str, StudyModel],
+    data: Bunch,
+    evaluation: Bunch,
+    loops: Bunch | None,
+    progress: bool,
+) -> tuple[pd.DataFrame, list[str]]:
+    summary = summarize(evaluation, models)
+    evaluation.results.to_csv(tmp / "results.csv", index=False)
+    summary.to_csv(tmp / "summary.csv", index=False)
+    builders = _figures(models, data, evaluation, loops)
+    for name, build in _progress(builders.items(), len(builders), "figures", progress):
+        build().savefig(tmp / name, dpi=90)
+    return summary, list(builders)
+
+
+def run_study(
+    config: StudyConfig | None = None,
+    out_dir: str | os.PathLike = "sysid_nn_results",
+    *,
+    overwrite: bool = False,
+    scheduler: str | None = None,
+    progress: bool = False,
+) -> Bunch:
+    """Run the whole section-4 study and write its figures, tables and report.
+
+    Writes into ``out_dir``: the figures of :data:`FIGURES` (PNG),
+    ``results.csv`` (one row per realisation, model and mode, see
+    :func:`evaluate`), ``summary.csv`` (:func:`summarize`) and ``report.md``.
+    Everything is written to a temporary directory next to ``out_dir`` and
+    moved in place at the end, so an interrupted run leaves no half-written
+    results.
+
+    Parameters
+    ----------
+    config : StudyConfig, optional
+        Default ``StudyConfig()``: the full study.
+    out_dir : path-like, default="sysid_nn_results"
+        Output directory; its parents are created.
+    overwrite : bool, default=False
+        Replace an existing ``out_dir``; otherwise it is an error.
+    scheduler : str, optional
+        Address of a ``dask.distributed`` scheduler: the evaluation and the
+        restarts run on its workers (``joblib.parallel_backend("dask")``);
+        needs the ``distributed`` extra. The results are the same.
+    progress : bool, default=False
+        Progress bars on stderr.
+
+    Returns
+    -------
+    Bunch
+        ``out_dir`` (Path), ``results``, ``summary``, ``models``, ``data``,
+        ``evaluation``, ``timings`` (seconds per step).
+
+    Raises
+    ------
+    FileExistsError
+        ``out_dir`` exists and ``overwrite`` is False (checked first).
+    OSError
+        ``out_dir`` cannot be written.
+
+    Examples
+    --------
+    The full study takes minutes (see ``benchmarks/results_study.md``);
+    ``StudyConfig(quick=True)`` well under one. An existing directory is
+    refused before any work:
+
+    >>> import tempfile
+    >>> from sysid_nn.study import StudyConfig, run_study
+    >>> run_study(StudyConfig(quick=True), tempfile.mkdtemp())
+    Traceback (most recent call last):
+    ...
+    FileExistsError: output directory '...' exists; pass overwrite=True to ...
+    """
+    config = StudyConfig() if config is None else config
+    timings: dict[str, float] = {}
+
+    @contextlib.contextmanager
+    def timed(step: str) -> Iterator[None]:
+        start = time.perf_counter()
+        yield
+        timings[step] = time.perf_counter() - start
+
+    with _staged_directory(out_dir, overwrite) as tmp:
+        with _joblib_backend(scheduler):
+            with timed("generate"):
+                data = generate_data(config)
+            with timed("fit"):
+                models = fit_models(data, config, progress=progress)
+            with timed("evaluate"):
+                evaluation = evaluate(models, data, config, progress=progress)
+        with timed("figures and tables"):
+            loops = hysteresis_loops(models, data, evaluation)
+            summary, figures = _write_outputs(
+                tmp, models, data, evaluation, loops, progress
+            )
+        write_report(
+            tmp / "report.md",
+            summary,
+            title="Section-4 study of Kirkegaard, Nielsen & Hansen (1995)",
+            setup=_study_setup(config, data, scheduler, timings),
+            models=models,
+            figures=figures,
+            extra={"Hysteresis": _hysteresis_lines(loops)},
+        )
+    return Bunch(
+        out_dir=Path(out_dir),
+        results=evaluation.results,
+        summary=summary,
+        models=models,
+        data=data,
+        evaluation=evaluation,
+        timings=timings,
+    )
+
+
+def run_validation(
+    model: StudyModel,
+    records: Mapping[str, Sequence[np.ndarray]],
+    out_dir: str | os.PathLike,
+    *,
+    dt: float,
+    overwrite: bool = False,
+    max_lag: int = 25,
+    alpha: float = 0.05,
+    n_jobs: int | None = None,
+    units: Mapping[str, str] | None = None,
+    setup: Sequence[str] = (),
+    progress: bool = False,
+) -> Bunch:
+    """Validate a fitted model on measured records: the study's report on them.
+
+    Prediction and simulation of every record, residual tests, eq. 19-20
+    statistics, figs 4.2-4.7 and ``report.md``, written like
+    :func:`run_study` (staged, then moved in place).
+
+    Parameters
+    ----------
+    model : StudyModel
+        Fitted estimator with the record fields it maps.
+    records : dict of str to sequence of 1-D arrays
+        One entry per field (``model.inputs`` and ``model.outputs``), each
+        a list with one array per experiment.
+    out_dir : path-like
+        Output directory.
+    dt : float
+        Sampling step of the records.
+    overwrite : bool, default=False
+        Replace an existing ``out_dir``.
+    max_lag, alpha : int, float
+        Residual tests' largest lag and significance level.
+    n_jobs : int, optional
+        Parallel jobs over records.
+    units : dict of str to str, optional
+        Unit of each record field, e.g. ``{"force": "N", "x": "m"}``, shown
+        on the figures' axes (and in the error statistics' axis).
+    setup : sequence of str
+        Extra lines for the report's setup section (e.g. file names).
+    progress : bool, default=False
+        Progress bars on stderr.
+
+    Returns
+    -------
+    Bunch
+        ``out_dir``, ``results``, ``summary``, ``evaluation``.
+
+    Examples
+    --------
+    >>> from sysid_nn import HystereticOscillator
+    >>> from sysid_nn.study import StudyModel, run_validation
+    >>> import tempfile, pathlib
+    >>> from sysid_nn import TDLRegressor
+    >>> rec = HystereticOscillator(r0=0.05).generate(2, n_samples=300, random_state=0)
+    >>> records = {"force": list(rec.excitation), "x": list(rec.displacement)}
+    >>> model = StudyModel("ARX", TDLRegressor(hidden_layer_sizes=(), n_init=1),
+    ...                    ("force",), ("x",))
+    >>> _ = model.estimator.fit(*model.arrays(records))
+    >>> out = pathlib.Path(tempfile.mkdtemp()) / "validation"
+    >>> report = run_validation(model, records, out, dt=0.01, max_lag=10,
+    ...                         units={"force": "m/s²", "x": "m"})
+    >>> sorted(p.name for p in out.glob("*.csv"))
+    ['results.csv', 'summary.csv']
+    """
+    # The residual tests' lags are checked against these records, not the study's.
+    shortest = min(len(x) for x in records[model.inputs[0]])
+    config = StudyConfig(
+        n_jobs=n_jobs,
+        max_lag=max_lag,
+        alpha=alpha,
+        n_samples=shortest,
+        paper_tdl_step=model.step,
+    )
+    models = {"model": model}
+    data = Bunch(test=records, dt=float(dt), units=dict(units or {}))
+    with _staged_directory(out_dir, overwrite) as tmp:
+        evaluation = evaluate(models, data, config, progress=progress)
+        summary, figures = _write_outputs(tmp, models, data, evaluation, None, progress)
+        n = summary["n_realizations"].iloc[0]
+        write_report(
+            tmp / "report.md",
+            summary,
+            title=f"Validation of {model.label}",
+            setup=[
+                *setup,
+                f"{n} record(s) at dt = {dt:g} s; residual tests with "
+                f"max_lag={max_lag}, alpha={alpha}.",
+                f"Software: {_versions()}.",
+                f"Machine: {_machine()}.",
+            ],
+            models=models,
+            figures=figures,
+        )
+    return Bunch(
+        out_dir=Path(out_dir),
+        results=evaluation.results,
+        summary=summary,
+        evaluation=evaluation,
+    )

@@ -1,0 +1,328 @@
+"""Tests of the confidence and prediction bands (``return_std=True``)."""
+
+from __future__ import annotations
+
+import pickle
+import warnings
+from itertools import pairwise
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from sysid_nn import ISSMRegressor, TDLRegressor
+from sysid_nn._uncertainty import _bandwidth, _bartlett
+from sysid_nn.plotting import plot_band
+from sysid_nn.uncertainty import ensemble_std, interval_coverage, normal_interval
+
+NOISE = 0.2
+
+
+def linear_record(n, rng, noise=NOISE):
+    """Output-error system: ``y = G u + e`` with white Gaussian ``e``."""
+    u = rng.standard_normal((n, 1))
+    clean = lfilter([0.0, 0.5], [1.0, -1.5, 0.7], u[:, 0])
+    return u, clean, clean + noise * rng.standard_normal(n)
+
+
+def nonlinear_record(n, rng, noise=0.05):
+    u = rng.standard_normal((n, 1))
+    y = np.zeros(n)
+    for t in range(2, n):
+        y[t] = 1.2 * y[t - 1] - 0.5 * y[t - 2] + np.tanh(0.8 * u[t - 1, 0])
+    return u, y + noise * rng.standard_normal(n)
+
+
+def linear_model():
+    return TDLRegressor(
+        output_lags=2,
+        input_lags=1,
+        hidden_layer_sizes=(),
+        n_init=1,
+        early_stopping=False,
+        random_state=0,
+    )
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    """A small network of each kind on a weakly non-linear noisy record."""
+    rng = np.random.default_rng(3)
+    u, y = nonlinear_record(300, rng)
+    u_new, y_new = nonlinear_record(200, rng)
+    common = dict(n_init=1, max_iter=20, early_stopping=False, random_state=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        models = {
+            "tdl": TDLRegressor(
+                output_lags=2, input_lags=2, hidden_layer_sizes=(3,), **common
+            ).fit(u, y),
+            "issm": ISSMRegressor(hidden_layer_sizes=(3,), **common).fit(u, y),
+            "issm-prediction": ISSMRegressor(
+                hidden_layer_sizes=(3,), focus="prediction", **common
+            ).fit(u, y),
+        }
+    return models, u_new, y_new
+
+
+def test_linear_coverage_of_new_records():
+    """Nominal 95 % intervals cover 93-97 % of new samples (Monte Carlo).
+
+    Each repetition fits the linear model to a fresh short record of an
+    output-error system and scores a new record: the prediction interval
+    (weights and noise) against the noisy measurements, the confidence
+    interval (weights only) against the noise-free response.
+    """
+    rng = np.random.default_rng(1)
+    pred, noise_only, conf = [], [], []
+    for _ in range(100):
+        u, _, y = linear_record(80, rng)
+        model = linear_model().fit(u, y)
+        u_new, clean_new, y_new = linear_record(200, rng)
+        mean, std = model.simulate(u_new, return_std=True)
+        pred.append(interval_coverage(y_new, *normal_interval(mean, std)))
+        s_noise = np.sqrt(model.noise_variance_)
+        noise_only.append(interval_coverage(y_new, *normal_interval(mean, s_noise)))
+        _, std_c = model.simulate(u_new, return_std=True, interval="confidence")
+        conf.append(interval_coverage(clean_new, *normal_interval(mean, std_c)))
+    assert 0.93 <= np.mean(pred) <= 0.97
+    assert 0.92 <= np.mean(conf) <= 0.975
+    # The weights' share is real: the noise alone covers less.
+    assert np.mean(noise_only) < np.mean(pred) - 0.003
+
+
+def test_noise_variance_estimates_the_measurement_noise():
+    rng = np.random.default_rng(2)
+    u, _, y = linear_record(2000, rng)
+    model = linear_model().fit(u, y)
+    np.testing.assert_allclose(np.sqrt(model.noise_variance_), NOISE, rtol=0.05)
+    # Output error: the one-step predictor feeds back noisy outputs and errs more.
+    assert model.one_step_noise_variance_[0] > model.noise_variance_[0]
+    assert model.n_effective_params_ == pytest.approx(4.0)
+
+
+def _finite_difference_std(model, run, step=1e-4):
+    """Propagate ``coefs_covariance_`` by central differences of ``run``.
+
+    ``var(f) = sum_k lam_k (f(w + h v_k) - f(w - h v_k))^2 / (2 h)^2`` over the
+    eigenpairs ``(lam_k, v_k)`` of the covariance.
+    """
+    w0 = model.coefs_.copy()
+    lam, V = np.linalg.eigh(model.coefs_covariance_)
+    var = 0.0
+    try:
+        for k in np.flatnonzero(lam > 1e-14 * lam.max()):
+            model.coefs_ = w0 + step * V[:, k]
+            plus = run()
+            model.coefs_ = w0 - step * V[:, k]
+            minus = run()
+            var = var + lam[k] * ((plus - minus) / (2 * step)) ** 2
+    finally:
+        model.coefs_ = w0
+    return np.sqrt(var)
+
+
+@pytest.mark.parametrize("name", ["tdl", "issm", "issm-prediction"])
+def test_propagated_variance_matches_finite_differences(fitted, name):
+    models, u_new, y_new = fitted
+    model = models[name]
+    _, std = model.simulate(u_new, return_std=True, interval="confidence")
+    expected = _finite_difference_std(model, lambda: model.simulate(u_new))
+    np.testing.assert_allclose(std, expected, rtol=1e-4, atol=1e-8 * expected.max())
+    _, std = model.predict(u_new, y_new, return_std=True, interval="confidence")
+    expected = _finite_difference_std(model, lambda: model.predict(u_new, y_new))
+    np.testing.assert_allclose(std, expected, rtol=1e-4, atol=1e-8 * expected.max())
+
+
+def test_prediction_interval_adds_the_noise_variance(fitted):
+    models, u_new, y_new = fitted
+    model = models["tdl"]
+    _, conf = model.simulate(u_new, return_std=True, interval="confidence")
+    _, pred = model.simulate(u_new, return_std=True)
+    np.testing.assert_allclose(pred**2, conf**2 + model.noise_variance_)
+    _, conf = model.predict(u_new, y_new, return_std=True, interval="confidence")
+    _, pred = model.predict(u_new, y_new, return_std=True)
+    np.testing.assert_allclose(pred**2, conf**2 + model.one_step_noise_variance_)
+    # Without measured outputs predict is the free run, band included.
+    mean, std = model.predict(u_new, return_std=True)
+    np.testing.assert_array_equal(mean, model.simulate(u_new))
+    np.testing.assert_array_equal(std, model.simulate(u_new, return_std=True)[1])
+
+
+def test_innovation_weights_get_the_one_step_covariance(fitted):
+    """After the innovation refit, those weights have a variance of their own."""
+    models, _, _ = fitted
+    model = models["issm"]
+    idx = model._innovation_index()
+    cov = model.coefs_covariance_
+    assert np.all(np.isfinite(cov))
+    others = np.setdiff1d(np.arange(len(model.coefs_)), idx)
+    np.testing.assert_array_equal(cov[np.ix_(idx, others)], 0.0)
+    assert np.trace(cov[np.ix_(idx, idx)]) > 0
+
+
+def test_tdl_start_carries_the_tdl_covariance():
+    """An ISSM realising a TDL network simulates it with the same band."""
+    rng = np.random.default_rng(4)
+    u, y = nonlinear_record(300, rng)
+    u_new, _ = nonlinear_record(150, rng)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = ISSMRegressor(
+            hidden_layer_sizes=(3,),
+            init="tdl",
+            n_init=1,
+            max_iter=20,
+            early_stopping=False,
+            random_state=0,
+        ).fit(u, y)
+    mean, std = model.simulate(u_new, return_std=True, interval="confidence")
+    mean_tdl, std_tdl = model.tdl_.simulate(
+        u_new, return_std=True, interval="confidence"
+    )
+    np.testing.assert_allclose(mean, mean_tdl, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(std, std_tdl, rtol=1e-6, atol=1e-12)
+
+
+def test_shapes_mirror_the_input():
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal((200, 1))
+    y = np.column_stack(
+        [lfilter([0, 0.5], [1, -0.5], u[:, 0]), lfilter([0, 0.2], [1, -0.3], u[:, 0])]
+    )
+    y = y + 0.01 * rng.standard_normal(y.shape)
+    model = ISSMRegressor(
+        hidden_layer_sizes=(), n_init=1, early_stopping=False, random_state=0
+    ).fit(u, y)
+    mean, std = model.simulate([u, u[:50]], return_std=True)
+    assert isinstance(std, list) and [s.shape for s in std] == [(200, 2), (50, 2)]
+    assert all(np.all(s > 0) for s in std)
+    np.testing.assert_allclose(std[0][:50], std[1])  # same start, same band
+    mean, std = model.predict(u, y, return_std=True)
+    assert std.shape == mean.shape == (200, 2)
+    one = linear_model().fit(u, y[:, 0])
+    assert one.simulate(u, return_std=True)[1].shape == (200,)
+
+
+def test_bad_arguments():
+    rng = np.random.default_rng(6)
+    u, _, y = linear_record(100, rng)
+    model = linear_model().fit(u, y)
+    with pytest.raises(ValueError, match="interval must be"):
+        model.simulate(u, return_std=True, interval="credible")
+    with pytest.raises(ValueError, match="horizon=1"):
+        model.predict(u, y, horizon=3, return_std=True)
+    with pytest.raises(ValueError, match="level must be"):
+        normal_interval(np.zeros(3), np.ones(3), level=95)
+    with pytest.raises(ValueError, match="must have the shape"):
+        normal_interval(np.zeros(3), np.ones(4))
+    with pytest.raises(ValueError, match="lists of at least two"):
+        ensemble_std(model, u, y, u)
+    with pytest.raises(ValueError, match="method must be"):
+        ensemble_std(model, [u, u], [y, y], u, method="jackknife")
+
+
+def test_pickle_keeps_the_band():
+    rng = np.random.default_rng(7)
+    u, _, y = linear_record(100, rng)
+    model = linear_model().fit(u, y)
+    again = pickle.loads(pickle.dumps(model))
+    np.testing.assert_array_equal(
+        again.simulate(u, return_std=True)[1], model.simulate(u, return_std=True)[1]
+    )
+
+
+def test_helpers_on_lists():
+    mean = [np.zeros(4), np.ones(2)]
+    std = [np.ones(4), np.full(2, 0.5)]
+    lower, upper = normal_interval(mean, std, level=0.5)
+    z = 0.6744897501960817
+    np.testing.assert_allclose(upper[1], 1 + 0.5 * z)
+    y = [np.array([0.0, 0.5, 2.0, -3.0]), np.array([1.0, 1.0])]
+    assert interval_coverage(y, lower, upper) == pytest.approx(4 / 6)
+
+
+def test_bootstrap_spread_agrees_with_the_delta_method():
+    """On a linear model the ensemble check and the delta method agree."""
+    rng = np.random.default_rng(8)
+    records = [linear_record(150, rng) for _ in range(6)]
+    X = [r[0] for r in records]
+    y = [r[2] for r in records]
+    u_new, _, _ = linear_record(200, rng)
+    model = linear_model().fit(X, y)
+    _, delta = model.simulate(u_new, return_std=True, interval="confidence")
+    mean, spread = ensemble_std(
+        model, X, y, u_new, n_members=12, random_state=0, n_jobs=1
+    )
+    assert mean.shape == delta.shape
+    ratio = np.median(spread / delta)
+    assert 0.5 < ratio < 2.0
+    # Restarts of a linear least-squares fit land on the same minimum.
+    _, same = ensemble_std(model, X, y, u_new, method="restarts", n_members=3)
+    assert np.max(same) < 1e-2 * np.max(delta)
+
+
+def test_plot_band_shades_the_interval():
+    t = np.arange(5.0)
+    ax = plot_band(t, np.zeros(5), np.ones(5), level=0.95, label="sim")
+    (band,) = ax.collections
+    ys = band.get_paths()[0].vertices[:, 1]
+    assert ys.max() == pytest.approx(1.959964, rel=1e-5)
+    assert ys.min() == pytest.approx(-1.959964, rel=1e-5)
+    assert ax.get_lines()[0].get_label() == "sim"
+    plt.close(ax.figure)
+
+
+def test_cli_validate_draws_and_reports_bands(tmp_path, capsys):
+    import pandas as pd
+
+    from sysid_nn.cli import main
+
+    rng = np.random.default_rng(9)
+    frames = []
+    for k in range(3):
+        u, _, y = linear_record(300, rng, noise=0.05)
+        frames.append(pd.DataFrame({"realization": k, "force": u[:, 0], "x": y}))
+    train, new = tmp_path / "train.csv", tmp_path / "new.csv"
+    frames[0].to_csv(train, index=False)
+    pd.concat(frames[1:]).to_csv(new, index=False)
+    model = tmp_path / "model.joblib"
+    argv = ["fit", str(train), "--input", "force", "--output", "x", "--hidden", "0"]
+    argv += ["--output-lags", "2", "--input-lags", "1", "--n-init", "1"]
+    assert main([*argv, "--dt", "0.01", "--save", str(model)]) == 0
+    out = tmp_path / "validation"
+    argv = ["validate", "--model", str(model), str(new), "--split-by", "realization"]
+    assert main([*argv, "--out", str(out), "--max-lag", "5", "--band", "0.9"]) == 0
+    printed = capsys.readouterr().out
+    table = pd.read_csv(out / "band.csv")
+    assert list(table["record"]) == [0, 1]
+    assert np.all((table["coverage"] > 0.8) & (table["coverage"] < 0.97))
+    assert "90 % prediction band of the free run covers" in printed
+    assert (out / "band_0.png").exists() and (out / "band_1.png").exists()
+    with pytest.raises(SystemExit):
+        main([*argv, "--out", str(out), "--band", "95"])
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.9])
+def test_long_run_variance_of_correlated_residuals(rho):
+    """The Bartlett estimate finds the long-run variance ``(1 + rho) / (1 - rho)``.
+
+    White residuals get a bandwidth of a sample or two and the plain
+    variance; AR(1) residuals the inflation that makes ``J^T J`` overstate
+    the information in correlated data.
+    """
+    rng = np.random.default_rng(10)
+    n = 40000
+    e = rng.standard_normal(n)
+    r = lfilter([1.0], [1.0, -rho], e) * np.sqrt(1 - rho**2)
+    bounds = np.array([0, n // 2, n])
+    L = _bandwidth(r[:, None], bounds)
+    meat = sum(_bartlett(r[a:b, None], L) for a, b in pairwise(bounds))
+    expected = (1 + rho) / (1 - rho)
+    assert float(meat[0, 0]) / n == pytest.approx(expected, rel=0.15)
+    assert L <= 2 if rho == 0 else L > 10
