@@ -185,6 +185,7 @@ _API_PAGES = [
     ("metrics", "Metrics and scorers", "sysid_nn.metrics"),
     ("plotting", "Plotting", "sysid_nn.plotting"),
     ("study", "The paper's study", "sysid_nn.study"),
+    ("datasets", "Benchmark data sets", "sysid_nn.datasets"),
 ]
 
 

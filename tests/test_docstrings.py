@@ -27,6 +27,7 @@ PUBLIC_MODULES = [
     "sysid_nn.metrics",
     "sysid_nn.plotting",
     "sysid_nn.study",
+    "sysid_nn.datasets",
 ]
 
 # The numpydoc checks enforced on every public object.
