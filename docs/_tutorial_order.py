@@ -16,6 +16,7 @@ ORDER = [
     "plot_grid_search.py",
     "plot_monte_carlo.py",
     "plot_csv_data.py",
+    "plot_benchmark_in_ten_lines.py",
     "plot_dask.py",
 ]
 
