@@ -133,22 +133,38 @@ def _sequence(data) -> tuple[np.ndarray, np.ndarray]:
     return u, y
 
 
-def _bunch(train, test, test_names, dt, n_skip, descr) -> Bunch:
-    X_train, y_train = map(list, zip(*(_sequence(d) for d in train), strict=True))
-    X_test, y_test = map(list, zip(*(_sequence(d) for d in test), strict=True))
+def _fetch(name, test_names, descr, data_home, download_if_missing) -> Bunch:
+    """Load a benchmark split by the official loader into the conventions."""
+    train, tests = _call_official(name, data_home, download_if_missing)
+    tests = list(tests) if isinstance(tests, (list, tuple)) else [tests]
+    X_train, y_train = _sequence(train)
+    X_test, y_test = map(list, zip(*(_sequence(d) for d in tests), strict=True))
     return Bunch(
-        X_train=X_train,
-        y_train=y_train,
+        X_train=[X_train],
+        y_train=[y_train],
         X_test=X_test,
         y_test=y_test,
         test_names=list(test_names),
-        dt=float(dt),
-        n_skip=int(n_skip),
+        dt=float(train.sampling_time),
+        n_skip=int(tests[0].state_initialization_window_length),
         DESCR=descr,
     )
 
 
-_RETURNS_DOC = """\
+#: Parameters section shared by the loaders' docstrings.
+_LOADER_PARAMETERS_DOC = """\
+    Parameters
+    ----------
+    data_home : str or path-like, default=None
+        Data directory (see :func:`get_data_home`).
+    download_if_missing : bool, default=True
+        Download the files when they are not in ``data_home``; with
+        ``False`` a missing benchmark raises :class:`OSError`."""
+
+#: Returns section shared by the loaders of split benchmarks.
+_LOADER_RETURNS_DOC = """\
+    Returns
+    -------
     Bunch
         ``X_train``, ``y_train``: lists with one experiment (``X`` of shape
         ``(n_samples, 1)``, ``y`` of shape ``(n_samples,)``), training and
@@ -159,22 +175,11 @@ _RETURNS_DOC = """\
         benchmark, its split and its reference."""
 
 
-def _doc_returns(func):
-    func.__doc__ = func.__doc__.replace("    {returns}", _RETURNS_DOC)
-    return func
-
-
-_LOADER_PARAMS_DOC = """\
-    data_home : str or path-like, default=None
-        Data directory (see :func:`get_data_home`).
-    download_if_missing : bool, default=True
-        Download the files when they are not in ``data_home``; with
-        ``False`` a missing benchmark raises :class:`OSError`."""
-
-
 def _doc(func):
-    func.__doc__ = func.__doc__.replace("    {params}", _LOADER_PARAMS_DOC)
-    return _doc_returns(func)
+    func.__doc__ = func.__doc__.replace(
+        "    {parameters}", _LOADER_PARAMETERS_DOC
+    ).replace("    {returns}", _LOADER_RETURNS_DOC)
+    return func
 
 
 @_doc
@@ -191,12 +196,8 @@ def fetch_silverbox(
     the training amplitudes) and its first 32 000 samples
     (``"arrow_no_extrapolation"``). Scoring skips 50 samples.
 
-    Parameters
-    ----------
-    {params}
+    {parameters}
 
-    Returns
-    -------
     {returns}
 
     Examples
@@ -206,16 +207,14 @@ def fetch_silverbox(
     >>> data.test_names, data.n_skip  # doctest: +SKIP
     (['multisine', 'arrow_full', 'arrow_no_extrapolation'], 50)
     """
-    train, tests = _call_official("Silverbox", data_home, download_if_missing)
-    return _bunch(
-        [train],
-        tests,
+    return _fetch(
+        "Silverbox",
         ["multisine", "arrow_full", "arrow_no_extrapolation"],
-        train.sampling_time,
-        tests[0].state_initialization_window_length,
         "Silverbox (Wigren & Schoukens 2013): electronic Duffing oscillator; "
         "train on the first 75 % of the multisine, test on its rest and on the "
         "arrow (full, and its first 32000 samples without extrapolation).",
+        data_home,
+        download_if_missing,
     )
 
 
@@ -231,12 +230,8 @@ def fetch_wiener_hammerstein(
     first 100 000 for training and validation, the remaining 78 800 for
     testing (``"test"``). Scoring skips 50 samples.
 
-    Parameters
-    ----------
-    {params}
+    {parameters}
 
-    Returns
-    -------
     {returns}
 
     Examples
@@ -246,17 +241,13 @@ def fetch_wiener_hammerstein(
     >>> len(data.y_train[0]), len(data.y_test[0])  # doctest: +SKIP
     (100000, 78800)
     """
-    train, test = _call_official(
-        "WienerHammerBenchMark", data_home, download_if_missing
-    )
-    return _bunch(
-        [train],
-        [test],
+    return _fetch(
+        "WienerHammerBenchMark",
         ["test"],
-        train.sampling_time,
-        test.state_initialization_window_length,
         "Wiener-Hammerstein 2009 (Schoukens, Suykens & Ljung 2009): samples "
         "5200:184000, the first 100000 to train, the rest to test.",
+        data_home,
+        download_if_missing,
     )
 
 
@@ -272,12 +263,8 @@ def fetch_cascaded_tanks(
     validation record for testing (``"test"``), 1024 samples each. Scoring
     skips 50 samples.
 
-    Parameters
-    ----------
-    {params}
+    {parameters}
 
-    Returns
-    -------
     {returns}
 
     Examples
@@ -287,15 +274,13 @@ def fetch_cascaded_tanks(
     >>> data.dt, data.n_skip  # doctest: +SKIP
     (4.0, 50)
     """
-    train, test = _call_official("Cascaded_Tanks", data_home, download_if_missing)
-    return _bunch(
-        [train],
-        [test],
+    return _fetch(
+        "Cascaded_Tanks",
         ["test"],
-        train.sampling_time,
-        test.state_initialization_window_length,
         "Cascaded Tanks (Schoukens, Mattson, Wigren & Noel 2016): train on the "
         "estimation record, test on the validation record.",
+        data_home,
+        download_if_missing,
     )
 
 
@@ -310,12 +295,8 @@ def fetch_emps(
     2019). Official split: ``DATA_EMPS`` for training and validation,
     ``DATA_EMPS_PULSES`` for testing (``"test"``). Scoring skips 20 samples.
 
-    Parameters
-    ----------
-    {params}
+    {parameters}
 
-    Returns
-    -------
     {returns}
 
     Examples
@@ -325,15 +306,13 @@ def fetch_emps(
     >>> data.n_skip  # doctest: +SKIP
     20
     """
-    train, test = _call_official("EMPS", data_home, download_if_missing)
-    return _bunch(
-        [train],
-        [test],
+    return _fetch(
+        "EMPS",
         ["test"],
-        train.sampling_time,
-        test.state_initialization_window_length,
         "EMPS (Janot, Gautier & Brunot 2019): train on DATA_EMPS, test on "
         "DATA_EMPS_PULSES.",
+        data_home,
+        download_if_missing,
     )
 
 
@@ -341,6 +320,7 @@ def fetch_emps(
 BOUCWEN_FS = 750.0
 
 
+@_doc
 def fetch_boucwen(
     *, data_home: str | os.PathLike | None = None, download_if_missing: bool = True
 ) -> Bunch:
@@ -355,13 +335,7 @@ def fetch_boucwen(
     (``n_skip = 0``); the multisine record is periodic, so a model can be run
     from rest over a few repetitions of its input and scored on the last.
 
-    Parameters
-    ----------
-    data_home : str or path-like, default=None
-        Data directory (see :func:`get_data_home`).
-    download_if_missing : bool, default=True
-        Download the files when they are not in ``data_home``; with
-        ``False`` a missing benchmark raises :class:`OSError`.
+    {parameters}
 
     Returns
     -------
