@@ -250,8 +250,9 @@ def _write_markdown(rows: list[dict]) -> None:
         "",
         f"Fit times in seconds ({platform.machine()}, Python "
         f"{platform.python_version()}, {os.cpu_count()} cores shared with other "
-        "jobs: the load varied between runs, so compare times within a row "
-        "only with care).",
+        "jobs; fits run with the estimators' default single job). The times grow "
+        "with the machine's load: on a loaded machine they can be several "
+        "times the idle ones, so compare times only within one run.",
         "",
         "| benchmark | " + " | ".join(labels[m] for m in MODELS) + " |",
         "|---|" + "---|" * len(MODELS),
@@ -317,7 +318,22 @@ def main(argv: list[str] | None = None) -> None:
             "| benchmark | chosen lags | CV NRMSE per lags | test RMSE | time (s) |",
             "|---|---|---|---|---|",
         ]
-        ORDER_MD.write_text("\n".join([*header, *lines]) + "\n")
+        # Keep the rows of the benchmarks not rerun this time.
+        done = {line.split("|")[1].strip() for line in lines}
+        kept = [
+            line
+            for line in (
+                ORDER_MD.read_text().splitlines() if ORDER_MD.is_file() else []
+            )
+            if line.startswith("| ")
+            and line.split("|")[1].strip() in BENCHMARKS
+            and line.split("|")[1].strip() not in done
+        ]
+        order = list(BENCHMARKS)
+        rows = sorted(
+            [*kept, *lines], key=lambda r: order.index(r.split("|")[1].strip())
+        )
+        ORDER_MD.write_text("\n".join([*header, *rows]) + "\n")
         print(ORDER_MD.read_text())
         return
     print(MD.read_text())
