@@ -15,6 +15,7 @@ import numpy as np
 from sysid_nn._base import _Data
 from sysid_nn._solvers import _Objective, _solve_lm
 
+#: Solver iterations spent refitting the innovation weights after a
 #: simulation-focused fit.
 _INNOVATION_REFIT_ITERS = 40
 #: Factors tried on the innovation weights, largest first, until the one-step
