@@ -260,6 +260,16 @@ def _latest() -> dict:
     return latest
 
 
+def _cpu_times(rows) -> tuple[list, list]:
+    """N and CPU time of the fits that recorded it."""
+    timed = [r for r in rows if "cpu_seconds" in r]
+    return [r["n_samples"] for r in timed], [r["cpu_seconds"] for r in timed]
+
+
+def _cpu(r: dict) -> str:
+    return f"{r['cpu_seconds']:.1f}" if "cpu_seconds" in r else "-"
+
+
 def _mb(nbytes: int) -> str:
     return f"{nbytes / 2**20:.0f}" if nbytes >= 2**20 else "< 1"
 
@@ -362,9 +372,12 @@ def _write_table() -> str:
         "",
         "## One record",
         "",
-        "| network | N | weights | fit (s) | peak memory above start (MB) | "
-        "iterations (chosen restart) | load |",
-        "|---|---|---|---|---|---|---|",
+        "Fit (s) is wall time; CPU (s) the process's CPU time, what the fit "
+        "would take on an idle core (where recorded).",
+        "",
+        "| network | N | weights | fit (s) | CPU (s) | peak memory above start "
+        "(MB) | iterations (chosen restart) | load |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for kind in ("tdl", "issm"):
         rows = sorted(
@@ -374,14 +387,15 @@ def _write_table() -> str:
         for r in rows:
             lines.append(
                 f"| {kind.upper()} | {r['n_samples']:,} | {r['n_weights']} | "
-                f"{r['seconds']:.1f} | {_mb(r['peak_rss_above_start'])} | "
+                f"{r['seconds']:.1f} | {_cpu(r)} | "
+                f"{_mb(r['peak_rss_above_start'])} | "
                 f"{r['n_iter']} | {r['load_average']:.1f} |"
             )
         ns = [r["n_samples"] for r in rows]
         lines.append(
             f"| {kind.upper()} slope (log-log) | | | "
             f"{_slope(ns, [r['seconds'] for r in rows])} | "
-            f"{_slope(*_above_mb(rows))} | | |"
+            f"{_slope(*_cpu_times(rows))} | {_slope(*_above_mb(rows))} | | |"
         )
     if costs:
         lines += _cost_lines(costs)
@@ -443,15 +457,15 @@ def _write_table() -> str:
         "",
         "## Field shape: 11 records x 7200 samples, two outputs",
         "",
-        "| network | fit (s) | restarts (s) | after the restarts (s) | "
+        "| network | fit (s) | CPU (s) | restarts (s) | after the restarts (s) | "
         "peak memory above start (MB) | load |",
-        "|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|",
     ]
     for kind in ("tdl", "issm"):
         r = latest.get((kind, "field"))
         if r:
             lines.append(
-                f"| {kind.upper()} | {r['seconds']:.1f} | "
+                f"| {kind.upper()} | {r['seconds']:.1f} | {_cpu(r)} | "
                 f"{r['restart_seconds']:.1f} | {r['after_fit_seconds']:.1f} | "
                 f"{_mb(r['peak_rss_above_start'])} | {r['load_average']:.1f} |"
             )

@@ -4,6 +4,7 @@ Usage::
 
     python benchmarks/run.py            # all benchmarks
     python benchmarks/run.py kernels    # only bench_kernels.py
+    python benchmarks/run.py field      # the community's benchmarks (long)
 
 Each script prints its own table and writes its results next to itself;
 this runner only executes them in one process tree, one after another, so

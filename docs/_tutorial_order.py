@@ -12,10 +12,13 @@ ORDER = [
     "plot_generate_data.py",
     "plot_tdl_prediction_vs_simulation.py",
     "plot_issm.py",
+    "plot_noisy_records.py",
     "plot_residual_analysis.py",
     "plot_grid_search.py",
     "plot_monte_carlo.py",
+    "plot_confidence_bands.py",
     "plot_csv_data.py",
+    "plot_benchmark_in_ten_lines.py",
     "plot_dask.py",
 ]
 

@@ -186,6 +186,7 @@ _API_PAGES = [
     ("plotting", "Plotting", "sysid_nn.plotting"),
     ("study", "The paper's study", "sysid_nn.study"),
     ("uncertainty", "Confidence and prediction bands", "sysid_nn.uncertainty"),
+    ("datasets", "Benchmark data sets", "sysid_nn.datasets"),
 ]
 
 

@@ -7,7 +7,8 @@ and the residual tests used to validate the identified models.
 
 Public modules: :mod:`sysid_nn.excitation`, :mod:`sysid_nn.oscillator`,
 :mod:`sysid_nn.residuals`, :mod:`sysid_nn.metrics`, :mod:`sysid_nn.plotting`,
-:mod:`sysid_nn.study`.
+:mod:`sysid_nn.study`, :mod:`sysid_nn.datasets` (the field's measured
+benchmarks) and :mod:`sysid_nn.uncertainty` (confidence and prediction bands).
 """
 
 from __future__ import annotations

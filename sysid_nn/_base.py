@@ -12,9 +12,7 @@ its kernels, the initial parameters, and the kernels themselves.
 from __future__ import annotations
 
 import functools
-import inspect
 import numbers
-import textwrap
 import threading
 import time
 import warnings
@@ -25,13 +23,14 @@ from itertools import pairwise
 import numpy as np
 import threadpoolctl
 from joblib import Parallel, delayed
-from sklearn.base import BaseEstimator
+from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
 from sysid_nn import _uncertainty
+from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._progress import report_stage
 from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 from sysid_nn._state_estimation import fit_initial_condition, noise_variance
@@ -98,53 +97,6 @@ def _single_threaded_blas():
                 _BLAS_LIMIT.restore_original_limits()
                 _release_blas_control()
                 _BLAS_LIMIT = None
-
-
-#: Parameter descriptions shared by the estimators' docstrings.
-_TRAINING_PARAMETERS_DOC = """\
-    solver : {"lm", "lbfgs", "slsqp"}, default="lm"
-        ``"lm"``: Levenberg-Marquardt on the exact recurrent Jacobian
-        (forward sensitivities), with Marquardt's scale-invariant damping;
-        ``"lbfgs"``: L-BFGS-B with the adjoint (backpropagation-through-time)
-        gradient; ``"slsqp"``: sequential quadratic programming as in the
-        paper, with the adjoint gradient.
-    max_iter : int, default=150
-        Iterations of the last training stage; the one-step and each shooting
-        stage get 2/3 and 4/15 of it.
-    tol : float, default=1e-8
-        Relative tolerance of the solver: a stage ends when the loss changes
-        by less than ``tol`` times its value (or the gradient or step become
-        that small).
-    n_init : int, default=4
-        Random restarts; the one with the best validation (or training) loss
-        is kept.
-    early_stopping : bool, default=True
-        Keep, over all accepted steps of all stages, the weights with the best
-        validation loss (free run for the simulation focus, one step for the
-        prediction focus) and stop the last stage after ``n_iter_no_change``
-        steps without improvement.
-    validation_fraction : float, default=0.2
-        Share of the sequences held out when ``early_stopping`` is on and no
-        ``X_val`` is given; with one or two sequences, the share of the last
-        one's tail, scored within a free run over its whole record.
-    n_iter_no_change : int, default=30
-        Patience of early stopping, in accepted steps.
-    random_state : int, RandomState instance or None, default=None
-        Seeds the restarts' initial weights.
-    verbose : bool, default=False
-        Print progress per stage.
-    n_jobs : int, default=None
-        Parallel jobs for the restarts (joblib semantics).
-""".rstrip("\n")
-
-
-def _document_training_parameters(cls):
-    """Insert the shared training parameters into ``cls.__doc__``."""
-    # Work on the cleaned text: Python 3.13 dedents docstrings itself.
-    shared = textwrap.dedent(_TRAINING_PARAMETERS_DOC)
-    doc = inspect.cleandoc(cls.__doc__).replace("%(training_parameters)s", shared)
-    cls.__doc__ = doc + "\n"
-    return cls
 
 
 class DivergenceWarning(UserWarning):
@@ -250,8 +202,13 @@ def _check_finite(a: np.ndarray, name: str, index: int | None, as_list: bool) ->
         )
 
 
-class _RecurrentRegressorBase(BaseEstimator):
-    """Base class of the recurrent-network regressors (not public)."""
+class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
+    """Base class of the recurrent-network regressors (not public).
+
+    :class:`~sklearn.base.RegressorMixin` sits here, below this class in the
+    method order: its ``score`` of the raw predictions gives way to the
+    free-run :meth:`score`, and its regressor tags are set before ours.
+    """
 
     _parameter_constraints: dict = {
         "hidden_layer_sizes": [
@@ -275,14 +232,18 @@ class _RecurrentRegressorBase(BaseEstimator):
         "n_jobs": [None, numbers.Integral],
     }
 
-    # ------------------------------------------------------------------ tags
-    @staticmethod
-    def _recurrent_tags(tags):
-        """Tags shared by the recurrent regressors.
+    def _store_parameters(self, arguments: dict) -> None:
+        """Store every constructor argument, untouched, under its name.
 
-        Called by each estimator's ``__sklearn_tags__`` after
-        :class:`~sklearn.base.RegressorMixin` has set the regressor tags.
+        ``arguments`` is the ``locals()`` of the estimator's ``__init__``,
+        whose explicit signature scikit-learn reads the parameters from.
         """
+        for name in self._get_param_names():
+            setattr(self, name, arguments[name])
+
+    # ------------------------------------------------------------------ tags
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
         tags.target_tags.required = True
         tags.target_tags.multi_output = True
         # Rows are time steps of one experiment, not independent samples: a
@@ -872,13 +833,13 @@ class _RecurrentRegressorBase(BaseEstimator):
             out.append(offset + scale * v.reshape(offset.shape))
         return out
 
+    @document_estimator
     def predict(self, X, y=None, *, horizon=1, return_std=False, interval="prediction"):
         """Predict the response, from measured outputs when they are given.
 
         Parameters
         ----------
-        X : array-like of shape (n_samples, n_inputs) or list of such
-            Excitation.
+        %(excitation)s
         y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list, \
 default=None
             Measured response. With it, the ``horizon``-step-ahead prediction
@@ -974,8 +935,29 @@ default=None
             return -np.inf
         return r2_score(y_true, y_pred, sample_weight=sample_weight)
 
+    def _initial_layout(self) -> tuple[tuple[int, ...], str, str]:
+        """Shape of one sequence's initial conditions, its count and meaning.
+
+        The two strings complete the error message of :meth:`_check_initial`.
+        """
+        raise NotImplementedError  # pragma: no cover - abstract
+
     def _check_initial(self, initial, n_seq: int, as_list: bool, name: str):
-        return initial  # subclasses validate their own initial conditions
+        """The initial conditions of every sequence, as arrays of their shape."""
+        if initial is None:
+            return None
+        shape, count, meaning = self._initial_layout()
+        out = []
+        for i, init in enumerate(self._per_sequence(initial, n_seq, as_list, name)):
+            a = np.asarray(init, dtype=np.float64)
+            if a.size != np.prod(shape) or not np.all(np.isfinite(a)):
+                where = f"{name}[{i}]" if as_list else name
+                raise ValueError(
+                    f"{where} must hold {count} finite values ({meaning}); got "
+                    f"shape {a.shape}."
+                )
+            out.append(a.reshape(shape))
+        return out
 
     @staticmethod
     def _per_sequence(values, n_seq: int, as_list: bool, name: str) -> list:

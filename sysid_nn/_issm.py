@@ -3,93 +3,27 @@
 from __future__ import annotations
 
 import numbers
-import warnings
 from itertools import pairwise
-from math import ceil
 
 import numpy as np
-from sklearn.base import RegressorMixin
 from sklearn.utils import Bunch
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from sysid_nn._base import (
-    _FREE_RUN,
-    _Data,
-    _document_training_parameters,
-    _RecurrentRegressorBase,
-)
+from sysid_nn._base import _FREE_RUN, _Data, _RecurrentRegressorBase
+from sysid_nn._estimator_docs import document_estimator
+from sysid_nn._innovation import UnstablePredictorWarning, stabilise_predictor
+from sysid_nn._issm_realisation import realise_tdl, start_tdl, validate_tdl_start
+from sysid_nn._issm_start import ARX_LAGS, arx_lags, linear_start
 from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_run
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
-from sysid_nn._solvers import _Objective, _solve_lm
-from sysid_nn._tdl import TDLRegressor
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]
 
-#: Output and input lags of the ARX model the linear part starts from, and
-#: of the TDL network an ``init="tdl"`` model starts from.
-_ARX_LAGS = 3
-#: Solver iterations spent refitting the innovation weights after a
-#: simulation-focused fit.
-_INNOVATION_REFIT_ITERS = 40
-#: Factors tried on the innovation weights, largest first, until the one-step
-#: predictor is stable (0 makes it the free run, stable with the simulator).
-_INNOVATION_SHRINKS = (1.0, 0.5, 0.25, 0.125, 0.0625, 0.0)
-#: A more shrunk innovation gain is preferred while its one-step validation
-#: loss stays within this factor of the best.
-_INNOVATION_MARGIN = 1.2
 
-
-class UnstablePredictorWarning(UserWarning):
-    """The one-step predictor of a fitted ISSM is not stable.
-
-    The innovation form ``Phi(t) - K(t) H`` of eq. 10 has spectral radius of
-    at least one along the training trajectory (or the one-step predictor left
-    the training range there): one-step and k-step predictions may drift away
-    from the measurements instead of tracking them.
-
-    Examples
-    --------
-    >>> from sysid_nn import UnstablePredictorWarning
-    >>> issubclass(UnstablePredictorWarning, UserWarning)
-    True
-    """
-
-
-class _NoTracker:
-    """Stands in for the validation tracker where no selection is wanted."""
-
-    stopped = False
-
-    def __call__(self, w) -> None:
-        pass
-
-
-class _Restricted:
-    """A stage objective seen through a subset ``idx`` of the weights."""
-
-    def __init__(self, objective: _Objective, w: np.ndarray, idx: np.ndarray):
-        self.objective, self.w, self.idx = objective, w.copy(), idx
-
-    def _full(self, v):
-        self.w[self.idx] = v
-        return self.w
-
-    def residuals(self, v):
-        return self.objective.residuals(self._full(v))
-
-    def normal_equations(self, v):
-        # Those of the subset are the rows and columns of the whole problem's.
-        JtJ, Jtr = self.objective.normal_equations(self._full(v))
-        return JtJ[np.ix_(self.idx, self.idx)], Jtr[self.idx]
-
-    def loss(self, v):
-        return self.objective.loss(self._full(v))
-
-
-@_document_training_parameters
-class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
+@document_estimator
+class ISSMRegressor(_RecurrentRegressorBase):
     """Recurrent network modelling a non-linear innovation state-space model.
 
     The network of eq. 7-8 of Kirkegaard, Nielsen & Hansen (1995),
@@ -232,13 +166,7 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         Solver iterations of the chosen restart over all stages.
     loss_ : float
         Final training loss of the chosen restart, in standardised units.
-    best_validation_score_ : float or None
-        Negative validation mean squared error (standardised) of the chosen
-        weights.
-    restart_scores_ : ndarray
-        Negative selection loss of every restart.
-    fit_time_ : float
-        Seconds spent in training.
+    %(selection_attributes)s
     output_noise_std_ : ndarray of shape (n_outputs,)
         White measurement noise on the training outputs, estimated from the
         records alone (residuals of a linear one-step model; an upper
@@ -251,16 +179,7 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         refitted after a simulation-focused fit from the one-step Jacobian,
         and with ``init="tdl"`` the TDL network's covariance mapped through
         the realisation; see :ref:`uncertainty`.
-    n_effective_params_ : float
-        Effective number of weights the data determine (the trace of the
-        hat matrix), used to correct the residual variances.
-    noise_variance_ : ndarray of shape (n_outputs,)
-        Residual variance of the free run on the training records (user's
-        units), corrected for ``n_effective_params_``.
-    one_step_noise_variance_ : ndarray of shape (n_outputs,)
-        The same for the one-step predictor.
-    feature_names_in_ : ndarray
-        Column names of ``X`` when it was a DataFrame.
+    %(variance_attributes)s
 
     See Also
     --------
@@ -314,34 +233,10 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
         verbose=False,
         n_jobs=None,
     ):
-        self.n_states = n_states
-        self.input_delay = input_delay
-        self.hidden_layer_sizes = hidden_layer_sizes
-        self.activation = activation
-        self.linear_part = linear_part
-        self.init = init
-        self.focus = focus
-        self.shooting_segments = shooting_segments
-        self.alpha = alpha
-        self.solver = solver
-        self.max_iter = max_iter
-        self.tol = tol
-        self.n_init = n_init
-        self.early_stopping = early_stopping
-        self.validation_fraction = validation_fraction
-        self.n_iter_no_change = n_iter_no_change
-        self.random_state = random_state
-        self.verbose = verbose
-        self.n_jobs = n_jobs
-
-    def __sklearn_tags__(self):
-        return self._recurrent_tags(super().__sklearn_tags__())
-
-    # RegressorMixin (left of the base) would score the raw predictions;
-    # the free-run R^2 with its divergence handling is the base's.
-    score = _RecurrentRegressorBase.score
+        self._store_parameters(locals())
 
     # -------------------------------------------------------------- public
+    @document_estimator
     def simulate(
         self,
         X,
@@ -358,8 +253,7 @@ class ISSMRegressor(RegressorMixin, _RecurrentRegressorBase):
 
         Parameters
         ----------
-        X : array-like of shape (n_samples, n_inputs) or list of such
-            Excitation.
+        %(excitation)s
         initial_state : array-like of shape (n_states,), or list of such, \
 default=None
             State just before the first sample: the measured outputs in the
@@ -383,23 +277,7 @@ such, default=None
             ``initial_state``. :meth:`predict_states` gives the one-step
             predictor's (filter's) estimate instead, which follows each
             measurement more closely.
-        return_std : bool, default=False
-            Also return the standard deviation of every sample (delta
-            method, see :ref:`uncertainty`).
-        interval : {"prediction", "confidence"}, default="prediction"
-            What the standard deviation is of (only used with
-            ``return_std``): ``"prediction"``, a new measurement (weight
-            uncertainty plus ``noise_variance_``); ``"confidence"``, the
-            model output (weight uncertainty only).
-
-        Returns
-        -------
-        y_sim : ndarray or list of ndarray
-            Simulated response; NaN from a sample where the run diverged (a
-            :class:`~sysid_nn.DivergenceWarning` says where).
-        y_std : ndarray or list of ndarray
-            Standard deviation of each value of ``y_sim``, same shape; only
-            with ``return_std=True``.
+        %(simulation_std)s
         """
         return self._simulate(
             X,
@@ -411,6 +289,7 @@ such, default=None
             y_init=y_init,
         )
 
+    @document_estimator
     def predict_states(self, X, y=None, *, initial_state=None) -> Bunch | list[Bunch]:
         """All states and the linearisation of eq. 12 along a trajectory.
 
@@ -420,8 +299,7 @@ such, default=None
 
         Parameters
         ----------
-        X : array-like of shape (n_samples, n_inputs) or list of such
-            Excitation.
+        %(excitation)s
         y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list, \
 default=None
             Measured outputs.
@@ -468,20 +346,16 @@ default=None
     def _history_length(self) -> int:
         return max(1, self.input_delay)
 
-    def _arx_lags(self) -> int:
-        """Lags of the ARX fit the linear start is realised from."""
-        return max(_ARX_LAGS, ceil(self.n_states_ / self.n_outputs_))
-
     def _lag_reach(self) -> int:
         # The linear start reads further back than the recurrence: the ARX
-        # fit, or the TDL network with _ARX_LAGS lags.
-        lags = _ARX_LAGS if self.init == "tdl" else self._arx_lags()
+        # fit, or the TDL network with ARX_LAGS lags.
+        lags = ARX_LAGS if self.init == "tdl" else arx_lags(self)
         return max(self._history_length(), lags, self.input_delay + lags - 1)
 
     def _validate_outputs(self) -> None:
         p = self.n_outputs_
         if self.init == "tdl":
-            self._validate_tdl_start()
+            validate_tdl_start(self)
             return
         if self.n_states is not None and self.n_states < p:
             raise ValueError(
@@ -515,22 +389,10 @@ default=None
             Yh.append(np.broadcast_to(ys, (h, self.n_outputs_)).copy())
         return Yh, [u0] * n_seq
 
-    def _check_initial(self, initial, n_seq, as_list, name):
-        if initial is None:
-            return None
-        inits = self._per_sequence(initial, n_seq, as_list, name)
-        out = []
-        for i, init in enumerate(inits):
-            a = np.asarray(init, dtype=np.float64).ravel()
-            if a.shape != (self.n_states_,) or not np.all(np.isfinite(a)):
-                where = f"{name}[{i}]" if as_list else name
-                raise ValueError(
-                    f"{where} must hold n_states = {self.n_states_} finite values "
-                    "(the measured outputs in your units, then the unmeasured "
-                    f"states); got shape {np.shape(init)}."
-                )
-            out.append(a)
-        return out
+    def _initial_layout(self):
+        count = f"n_states = {self.n_states_}"
+        meaning = "the measured outputs in your units, then the unmeasured states"
+        return (self.n_states_,), count, meaning
 
     def _noise_sensitive(self) -> bool:
         # Measured: with displacement and velocity the ISSM kept its accuracy
@@ -569,7 +431,7 @@ default=None
         data = self._stack(Xs, ys, initial, past)
         return data, self._initial_states(data, initial), as_list
 
-    # ------------------------------------------------- starting from a TDL
+    # ------------------------------------------------------ starting point
     def fit(self, X, y, *, X_val=None, y_val=None):
         # init="tdl" trains a TDL network on the same records first; it needs
         # them as given, before standardisation and stacking.
@@ -589,233 +451,17 @@ default=None
 
     fit.__doc__ = _RecurrentRegressorBase.fit.__doc__
 
-    def _validate_tdl_start(self) -> None:
-        p, m = self.n_outputs_, self.n_features_in_
-        n = p * _ARX_LAGS + m * (_ARX_LAGS - 1)
-        if self.n_states is not None and self.n_states != n:
-            raise ValueError(
-                f'init="tdl" realises a TDL network with {_ARX_LAGS} output and '
-                f"{_ARX_LAGS} input lags in state space, which takes n_states = "
-                f"{n} here ({_ARX_LAGS} x {p} outputs + {_ARX_LAGS - 1} x {m} "
-                f"inputs); got n_states={self.n_states}. Use n_states=None."
-            )
-        if not self.linear_part and self._hidden_layers():
-            raise ValueError(
-                'init="tdl" needs linear_part=True: the states holding past '
-                "outputs and inputs are shifted by the linear part."
-            )
-        self.n_states_ = n
-
-    def _start_tdl(self) -> TDLRegressor:
-        """The TDL network an ``init="tdl"`` model starts from, unfitted.
-
-        It gets every parameter the two estimators share (structure and
-        training); the lags are the TDL defaults the realisation assumes.
-        """
-        shared = set(self._get_param_names()) & set(TDLRegressor._get_param_names())
-        return TDLRegressor(
-            output_lags=_ARX_LAGS,
-            input_lags=_ARX_LAGS,
-            **{name: getattr(self, name) for name in sorted(shared)},
-        )
-
-    def _realise_tdl(self, tdl: TDLRegressor) -> tuple[np.ndarray, Bunch]:
-        """Weights with which this model runs exactly as the fitted ``tdl``.
-
-        The state after sample ``t`` is ``[y(t), y(t-1), ..., y(t-n_a+1),
-        F(t-n_k), ..., F(t-n_k-n_b+2)]``: the measured outputs in this model's
-        standardised units, the past outputs and excitation in the user's
-        units divided by their scale (zero at rest). The TDL's regressor is
-        then an affine map ``phi = M z + phi0`` of the network input ``z =
-        [x(t-1), F(t-n_k), E(t-1)]``, with the innovations added to the newest
-        output (the one-step predictor sees the measured output there); the
-        older lags are shifted by the linear part. Returns the weights and
-        the linear part ``A, B, K, c``.
-        """
-        p, m, n = self.n_outputs_, self.n_features_in_, self.n_states_
-        na, nb = tdl.output_lags, tdl.input_lags
-        nz = n + m + p
-        sy, my, sx, mx = self._y_scale, self._y_mean, self._x_scale, self._x_mean
-        ty, tmy, tx, tmx = tdl._y_scale, tdl._y_mean, tdl._x_scale, tdl._x_mean
-        y_states = np.arange(p, na * p)  # y(t-1), ..., y(t-na+1)
-        u_states = np.arange(na * p, n)  # F(t-nk), ..., F(t-nk-nb+2)
-        u_in, e_in = np.arange(n, n + m), np.arange(n + m, nz)
-        M, phi0 = np.zeros((na * p + nb * m, nz)), np.zeros(na * p + nb * m)
-        ky, kx = np.tile(np.arange(p), na - 1), np.tile(np.arange(m), nb - 1)
-        # Newest output: the state (plus innovation) in this model's units.
-        M[np.arange(p), np.arange(p)] = sy / ty
-        M[np.arange(p), e_in] = sy / ty
-        phi0[:p] = (my - tmy) / ty
-        M[y_states, y_states] = sy[ky] / ty[ky]
-        phi0[y_states] = -tmy[ky] / ty[ky]
-        # Newest excitation from the input, older ones from the states.
-        rows = na * p + np.arange(m)
-        M[rows, u_in] = sx / tx
-        phi0[rows] = (mx - tmx) / tx
-        rows = na * p + m + np.arange(len(u_states))
-        M[rows, u_states] = sx[kx] / tx[kx]
-        phi0[rows] = -tmx[kx] / tx[kx]
-        T, t0 = tdl._S @ M, tdl._S @ phi0  # the TDL network's input = T z + t0
-
-        # The linear part: the TDL output in rows :p, shifts below. y(t-1)
-        # is the newest output (state plus innovation) back in user units.
-        L, c = np.zeros((n, nz)), np.zeros(n)
-        if na > 1:
-            L[np.arange(p, 2 * p), np.arange(p)] = 1.0
-            L[np.arange(p, 2 * p), e_in] = 1.0
-            c[p : 2 * p] = my / sy
-            L[y_states[p:], y_states[:-p]] = 1.0
-        if nb > 1:
-            L[u_states[:m], u_in] = 1.0
-            c[u_states[:m]] = mx / sx
-            L[u_states[m:], u_states[:-m]] = 1.0
-        gain = ty / sy  # the TDL's standardised output in this model's units
-        c[:p] = (tmy - my) / sy
-        w_tdl, sizes = tdl.coefs_, tdl._sizes_
-        layers, end = tdl._layer_slices()
-        if tdl._bypass():
-            bypass = w_tdl[end:].reshape(p, -1)
-            L[:p] = gain[:, None] * (bypass @ T)
-            c[:p] += gain * (bypass @ t0)
-        w = np.zeros(n_params(self._sizes_, self._bypass()))
-        if len(layers) == 1:  # the linear TDL: its map is the linear part
-            W, b = w_tdl[layers[0][0]].reshape(p, -1), w_tdl[layers[0][1]]
-            L[:p] = gain[:, None] * (W @ T)
-            c[:p] += gain * (W @ t0 + b)
-            w[: L.size], w[L.size :] = L.ravel(), c
-            return w, self._linear_blocks(L, c)
-        mine, my_end = self._layers()
-        for i, ((ws, bs), (w_off, b_off, n_out, _)) in enumerate(
-            zip(layers, mine, strict=True)
-        ):
-            W, b = w_tdl[ws].reshape(sizes[i + 1], sizes[i]), w_tdl[bs]
-            if i == 0:
-                W, b = W @ T, b + W @ t0
-            if i == len(layers) - 1:
-                W = np.vstack([gain[:, None] * W, np.zeros((n - p, W.shape[1]))])
-                b = c + np.concatenate([gain * b, np.zeros(n - p)])
-            w[w_off:b_off], w[b_off : b_off + n_out] = W.ravel(), b
-        w[my_end:] = L.ravel()
-        return w, self._linear_blocks(L, c)
-
-    def _linear_blocks(self, L: np.ndarray, c: np.ndarray) -> Bunch:
-        n, m = self.n_states_, self.n_features_in_
-        return Bunch(A=L[:, :n], B=L[:, n : n + m], K=L[:, n + m :], c=c)
-
-    # ------------------------------------------------ linear starting point
-    def _arx(self, data: _Data, lags: int):
-        """Least-squares ARX fit ``y(t) = sum A_i y(t-i) + sum B_j u(t-nk-j) + c``.
-
-        Only rows whose lags lie in the measured part of a sequence are used.
-        Returns ``(A_list, B_list, c, rows)``.
-        """
-        p, nk = self.n_outputs_, self.input_delay
-        rows = []
-        for a, b in pairwise(data.starts):
-            first = a + data.h + max(lags, nk + lags - 1)
-            rows.append(np.arange(first, b))
-        rows = np.concatenate(rows)
-        phi = self._arx_regressors(data, rows, lags)
-        theta = np.zeros((phi.shape[1] + 1, p))
-        if len(rows):
-            design = np.hstack([phi, np.ones((len(rows), 1))])
-            theta, *_ = np.linalg.lstsq(design, data.Y[rows], rcond=None)
-        m = self.n_features_in_
-        A = [theta[i * p : (i + 1) * p].T for i in range(lags)]
-        B = [theta[lags * p + j * m : lags * p + (j + 1) * m].T for j in range(lags)]
-        return A, B, theta[-1], rows
-
-    def _arx_regressors(self, data: _Data, rows: np.ndarray, lags: int) -> np.ndarray:
-        nk = self.input_delay
-        blocks = [data.Y[rows - i] for i in range(1, lags + 1)]
-        blocks += [data.U[rows - nk - j] for j in range(lags)]
-        return np.hstack(blocks) if blocks else np.empty((len(rows), 0))
-
     def _prepare_structure(self, data: _Data) -> None:
+        # The linear start (_issm_start) or the realised TDL network
+        # (_issm_realisation).
         self._sizes_ = self._sizes()
         self._act = ACTIVATIONS[self.activation]
         if self.init == "tdl":
             X, y, X_val, y_val = self._fit_records
-            self.tdl_ = self._start_tdl().fit(X, y, X_val=X_val, y_val=y_val)
-            self._tdl_weights, self.linear_model_ = self._realise_tdl(self.tdl_)
-            return
-        p, n, nk = self.n_outputs_, self.n_states_, self.input_delay
-        lags = self._arx_lags()
-        A_i, B_j, c, rows = self._arx(data, lags)
-        # Observer-form ARX states along the data: block i is the part of
-        # the prediction of y(t + i) already fixed by data up to t - 1, so
-        # block 0 is the one-step prediction yhat(t).
-        xi = np.zeros((len(rows), lags * p))
-        for i in range(lags):
-            for j in range(i, lags):
-                xi[:, i * p : (i + 1) * p] += data.Y[rows - 1 - j + i] @ A_i[j].T
-                xi[:, i * p : (i + 1) * p] += data.U[rows - nk - j + i] @ B_j[j].T
-        xi[:, :p] += c
-        x = xi @ self._state_coordinates(xi, p, n).T
-        # Zero of the unmeasured states: their mean where the training
-        # records start (the rest state for records that start at rest).
-        first = np.flatnonzero(np.diff(rows, prepend=-2) != 1)
-        x[:, p:] -= x[first, p:].mean(axis=0)
-        self.linear_model_ = self._fit_linear_model(data, rows, x)
-
-    def _fit_linear_model(self, data: _Data, rows: np.ndarray, x: np.ndarray):
-        """Least-squares linear innovation model on the ARX-derived states.
-
-        ``x(t) = A [y(t-1); x_u(t-1)] + B u(t-nk) + c`` with ``x_u`` the
-        unmeasured states, i.e. ``K = A H^T`` in
-        ``x(t) = A x(t-1) + B u(t-nk) + K e(t-1) + c``.
-        """
-        p, n, m = self.n_outputs_, self.n_states_, self.n_features_in_
-        pairs = np.flatnonzero(np.diff(rows) == 1) + 1
-        t = rows[pairs]
-        # K = A H^T: the one-step predictor feeds the measured outputs in
-        # place of the measured states. A free least-squares K made the
-        # reduced predictor unstable on the hysteretic oscillator.
-        design = np.hstack(
-            [
-                data.Y[t - 1],
-                x[pairs - 1, p:],
-                data.U[t - self.input_delay],
-                np.ones((len(t), 1)),
-            ]
-        )
-        theta = np.zeros((design.shape[1], n))
-        if len(t):
-            theta, *_ = np.linalg.lstsq(design, x[pairs], rcond=None)
-        A, B = theta[:n].T, theta[n : n + m].T
-        K = A[:, :p].copy()
-        return Bunch(A=A, B=B, K=K, c=theta[-1])
-
-    @staticmethod
-    def _state_coordinates(xi: np.ndarray, p: int, n: int) -> np.ndarray:
-        """Fixed map ``x = T xi`` from observer-form to model states.
-
-        The first ``p`` states are the predicted outputs themselves; the
-        others are the remaining observer-form directions with the part
-        explained by the outputs removed (least-squares residual), ordered by
-        variance along the training data and scaled to unit variance.
-        Directions beyond ``n`` are dropped.
-        """
-        N = xi.shape[1]
-        T = np.zeros((n, N))
-        T[:p, :p] = np.eye(p)
-        if len(xi) > 1:
-            centred = xi - xi.mean(axis=0)
-            out, rest = centred[:, :p], centred[:, p:]
-            C, *_ = np.linalg.lstsq(out, rest, rcond=None)  # rest ~ out @ C
-            resid = rest - out @ C
+            self.tdl_ = start_tdl(self).fit(X, y, X_val=X_val, y_val=y_val)
+            self._tdl_weights, self.linear_model_ = realise_tdl(self, self.tdl_)
         else:
-            C, resid = np.zeros((p, N - p)), np.zeros((1, N - p))
-        var, V = np.linalg.eigh(resid.T @ resid / max(1, len(resid)))
-        var, V = var[::-1][: n - p], V[:, ::-1][:, : n - p]
-        # Directions the data barely excite (an ARX of higher order than the
-        # system) keep a bounded scale instead of blowing up.
-        total = float(np.var(xi, axis=0).sum()) if len(xi) > 1 else 1.0
-        var = np.maximum(var, max(1e-8 * var.max(initial=0.0), 1e-12 * total, 1e-300))
-        W = V.T / np.sqrt(var)[:, None]
-        T[p:, p:] = W
-        T[p:, :p] = -W @ C.T
-        return T
+            self.linear_model_ = linear_start(self, data)
 
     def _layers(self):
         """``(weight_offset, bias_offset, n_out, n_in)`` per layer; bypass offset."""
@@ -930,95 +576,5 @@ default=None
 
     # ---------------------------------------------------- stable predictor
     def _after_fit(self, train: _Data, val: _Data | None) -> None:
-        if self.focus == "simulation":
-            self.coefs_ = self._refit_innovations(self.coefs_, train, val)
-        rho = self._predictor_radius(self.coefs_, train)
-        self.predictor_spectral_radius_ = rho
-        if not rho < 1.0:
-            warnings.warn(
-                f"The one-step predictor of this {type(self).__name__} is not "
-                f"stable: the innovation form Phi(t) - K(t) H has spectral radius "
-                f"{rho:.4g} >= 1 along the training data. One-step and k-step "
-                "predictions may drift from the measurements; use "
-                'focus="prediction", linear_part=True or more training data.',
-                UnstablePredictorWarning,
-                stacklevel=3,
-            )
-
-    def _substitution_gain(self, w: np.ndarray) -> np.ndarray:
-        """Weights on ``E`` copied from those on the measured states.
-
-        The network then sees ``x[:p] + e = y`` in place of the measured
-        states: the one-step predictor becomes the model run on measured
-        outputs, as in multiple shooting (``K = A H^T`` for the linear part).
-        """
-        w = w.copy()
-        measured = self._input_columns(np.arange(self.n_outputs_))
-        w[self._innovation_index()] = w[measured]
-        return w
-
-    def _refit_innovations(
-        self, w: np.ndarray, train: _Data, val: _Data | None
-    ) -> np.ndarray:
-        """Refit the weights on ``E`` to the one-step loss.
-
-        They do not enter the free run, which therefore stays unchanged. A
-        version of the gain counts only if its one-step predictor also stays
-        finite on the validation data, when there are any.
-        """
-        mask = self._penalty_mask()
-
-        def one_step(data: _Data) -> _Objective:
-            return _Objective(self, data, 1, mask, len(data.modelled) * self.n_outputs_)
-
-        objective = one_step(train)
-        idx = self._innovation_index()
-        candidates = [self._substitution_gain(w), w]
-        start = min(candidates, key=objective.loss)
-        if np.isfinite(objective.loss(start)):
-            sub = _Restricted(objective, start, idx)
-            v, _, _ = _solve_lm(
-                sub, start[idx], _INNOVATION_REFIT_ITERS, self.tol, _NoTracker()
-            )
-            refit = start.copy()
-            refit[idx] = v
-            candidates.insert(0, refit)
-        # Selection keeps the one-step predictor stable: the innovation
-        # weights of each candidate are shrunk towards zero (where the
-        # predictor is the free run) in steps; a version counts if its
-        # innovation form is stable along the training data and its one-step
-        # predictor stays finite on the validation data. A refit to noisy
-        # records can be stable on them and still diverge on others; dropping
-        # the innovations altogether would leave the one-step predictor no
-        # better than the free run.
-        check = one_step(val) if val is not None else None
-        stable = []
-        for candidate in candidates:
-            for shrink in _INNOVATION_SHRINKS:
-                shrunk = candidate.copy()
-                shrunk[idx] *= shrink
-                if self._predictor_radius(shrunk, train) < 1.0 and (
-                    check is None or np.isfinite(check.loss(shrunk))
-                ):
-                    stable.append((objective.loss(shrunk), shrink, shrunk))
-        if not stable:
-            return candidates[0]
-        best = min(loss for loss, _, _ in stable)
-        if not np.isfinite(best):
-            return stable[0][2]
-        # The most shrunk version within a margin of the best: a predictor at
-        # the edge of stability on a few records diverges on others.
-        near = [entry for entry in stable if entry[0] <= _INNOVATION_MARGIN * best]
-        return min(near, key=lambda entry: (entry[1], entry[0]))[2]
-
-    def _predictor_radius(self, w: np.ndarray, data: _Data) -> float:
-        """Spectral radius of the mean ``Phi(t) - K(t) H`` of the one-step predictor."""
-        X0 = self._initial_states(data)
-        _, _, diverged, state = self._run_from(w, data, 1, False, X0, True)
-        if (diverged >= 0).any():
-            return np.inf
-        n, m, p = self.n_states_, self.n_features_in_, self.n_outputs_
-        D = state[3][data.modelled]
-        M = D[:, :, :n].mean(axis=0)
-        M[:, :p] -= D[:, :, n + m :].mean(axis=0)
-        return float(np.max(np.abs(np.linalg.eigvals(M))))
+        # The innovation gain refit and its stability check (_innovation).
+        stabilise_predictor(self, train, val)

@@ -6,15 +6,10 @@ import numbers
 from math import comb
 
 import numpy as np
-from sklearn.base import RegressorMixin
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from sysid_nn._base import (
-    _FREE_RUN,
-    _Data,
-    _document_training_parameters,
-    _RecurrentRegressorBase,
-)
+from sysid_nn._base import _FREE_RUN, _Data, _RecurrentRegressorBase
+from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
@@ -22,8 +17,8 @@ from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
 __all__ = ["TDLRegressor"]
 
 
-@_document_training_parameters
-class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
+@document_estimator
+class TDLRegressor(_RecurrentRegressorBase):
     """Multilayer perceptron fed back its own outputs through a tapped delay line.
 
     The network of eq. 4 of Kirkegaard, Nielsen & Hansen (1995),
@@ -99,13 +94,7 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     loss_ : float
         Final training loss of the chosen restart (free run for simulation
         focus), in standardised units.
-    best_validation_score_ : float or None
-        Negative validation mean squared error (standardised) of the chosen
-        weights.
-    restart_scores_ : ndarray
-        Negative selection loss of every restart.
-    fit_time_ : float
-        Seconds spent in training.
+    %(selection_attributes)s
     output_noise_std_ : ndarray of shape (n_outputs,)
         White measurement noise on the training outputs, estimated from the
         records alone (residuals of a linear one-step model; an upper
@@ -114,16 +103,7 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
     coefs_covariance_ : ndarray of shape (n_coefs, n_coefs)
         Delta-method covariance of ``coefs_`` (standardised units), from the
         Jacobian of the final training objective; see :ref:`uncertainty`.
-    n_effective_params_ : float
-        Effective number of weights the data determine (the trace of the
-        hat matrix), used to correct the residual variances.
-    noise_variance_ : ndarray of shape (n_outputs,)
-        Residual variance of the free run on the training records (user's
-        units), corrected for ``n_effective_params_``.
-    one_step_noise_variance_ : ndarray of shape (n_outputs,)
-        The same for the one-step predictor.
-    feature_names_in_ : ndarray
-        Column names of ``X`` when it was a DataFrame.
+    %(variance_attributes)s
 
     See Also
     --------
@@ -176,34 +156,10 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
         verbose=False,
         n_jobs=None,
     ):
-        self.output_lags = output_lags
-        self.input_lags = input_lags
-        self.input_delay = input_delay
-        self.hidden_layer_sizes = hidden_layer_sizes
-        self.activation = activation
-        self.linear_bypass = linear_bypass
-        self.lag_representation = lag_representation
-        self.focus = focus
-        self.shooting_segments = shooting_segments
-        self.alpha = alpha
-        self.solver = solver
-        self.max_iter = max_iter
-        self.tol = tol
-        self.n_init = n_init
-        self.early_stopping = early_stopping
-        self.validation_fraction = validation_fraction
-        self.n_iter_no_change = n_iter_no_change
-        self.random_state = random_state
-        self.verbose = verbose
-        self.n_jobs = n_jobs
-
-    def __sklearn_tags__(self):
-        return self._recurrent_tags(super().__sklearn_tags__())
-
-    # RegressorMixin precedes the base in the MRO: use the sequence-aware score.
-    score = _RecurrentRegressorBase.score
+        self._store_parameters(locals())
 
     # -------------------------------------------------------------- public
+    @document_estimator
     def simulate(
         self,
         X,
@@ -218,8 +174,7 @@ class TDLRegressor(RegressorMixin, _RecurrentRegressorBase):
 
         Parameters
         ----------
-        X : array-like of shape (n_samples, n_inputs) or list of such
-            Excitation.
+        %(excitation)s
         initial_outputs : array-like of shape (output_lags, n_outputs) or \
 (output_lags,), or list of such, default=None
             Measured outputs just before the first sample, oldest first.
@@ -242,23 +197,7 @@ such, default=None
             noise into the run). The
             whole record is simulated from the estimate; score it after the
             window. Not together with ``initial_outputs``.
-        return_std : bool, default=False
-            Also return the standard deviation of every sample (delta
-            method, see :ref:`uncertainty`).
-        interval : {"prediction", "confidence"}, default="prediction"
-            What the standard deviation is of (only used with
-            ``return_std``): ``"prediction"``, a new measurement (weight
-            uncertainty plus ``noise_variance_``); ``"confidence"``, the
-            model output (weight uncertainty only).
-
-        Returns
-        -------
-        y_sim : ndarray or list of ndarray
-            Simulated response; NaN from a sample where the run diverged (a
-            :class:`~sysid_nn.DivergenceWarning` says where).
-        y_std : ndarray or list of ndarray
-            Standard deviation of each value of ``y_sim``, same shape; only
-            with ``return_std=True``.
+        %(simulation_std)s
 
         Examples
         --------
@@ -314,22 +253,10 @@ such, default=None
                 Yh[s][h - self.output_lags :] = (init - self._y_mean) / self._y_scale
         return Yh, [u0] * n_seq
 
-    def _check_initial(self, initial, n_seq, as_list, name):
-        if initial is None:
-            return None
-        inits = self._per_sequence(initial, n_seq, as_list, name)
+    def _initial_layout(self):
         shape = (self.output_lags, self.n_outputs_)
-        out = []
-        for i, init in enumerate(inits):
-            a = np.asarray(init, dtype=np.float64)
-            if a.size != shape[0] * shape[1] or not np.all(np.isfinite(a)):
-                raise ValueError(
-                    f"{name}{f'[{i}]' if as_list else ''} must hold output_lags x "
-                    f"n_outputs = {shape} finite values (the last measured outputs, "
-                    f"oldest first); got shape {a.shape}."
-                )
-            out.append(a.reshape(shape))
-        return out
+        count = f"output_lags x n_outputs = {shape}"
+        return shape, count, "the last measured outputs, oldest first"
 
     def _initial_units(self):
         shape = (self.output_lags, 1)

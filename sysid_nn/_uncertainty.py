@@ -223,14 +223,17 @@ def _realisation_map(est) -> np.ndarray:
     The realisation is affine in the TDL's weights, so unit steps give it
     exactly.
     """
+    # Imported here: the estimators' modules import this one.
+    from sysid_nn._issm_realisation import realise_tdl
+
     tdl = copy.copy(est.tdl_)
     w0 = tdl.coefs_
-    base, _ = est._realise_tdl(tdl)
+    base, _ = realise_tdl(est, tdl)
     G = np.empty((len(base), len(w0)))
     for j in range(len(w0)):
         tdl.coefs_ = w0.copy()
         tdl.coefs_[j] += 1.0
-        G[:, j] = est._realise_tdl(tdl)[0] - base
+        G[:, j] = realise_tdl(est, tdl)[0] - base
     return G
 
 

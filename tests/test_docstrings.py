@@ -28,6 +28,7 @@ PUBLIC_MODULES = [
     "sysid_nn.plotting",
     "sysid_nn.study",
     "sysid_nn.uncertainty",
+    "sysid_nn.datasets",
 ]
 
 # The numpydoc checks enforced on every public object.

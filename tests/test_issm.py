@@ -17,7 +17,9 @@ from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from sysid_nn import ISSMRegressor
 from sysid_nn._base import _FREE_RUN
+from sysid_nn._innovation import predictor_radius, refit_innovations
 from sysid_nn._issm import UnstablePredictorWarning
+from sysid_nn._issm_realisation import realise_tdl
 
 
 # --------------------------------------------------------------------------
@@ -344,7 +346,7 @@ def test_innovation_refit_leaves_free_run_unchanged():
     stale = model.coefs_.copy()
     stale[model._innovation_index()] = 0.0
     before = model._run(stale, data, _FREE_RUN, False)[0]
-    refit = model._refit_innovations(stale, data, None)
+    refit = refit_innovations(model, stale, data, None)
     np.testing.assert_array_equal(model._run(refit, data, _FREE_RUN, False)[0], before)
     one = model._run(refit, data, 1, False)[0]
     one_stale = model._run(stale, data, 1, False)[0]
@@ -359,7 +361,7 @@ def test_unstable_predictor_warns():
     bad = model.coefs_.copy()
     bad[model._innovation_index()] *= -3.0  # over-correcting innovations
     model.coefs_ = bad
-    assert model._predictor_radius(bad, data) > 1.0
+    assert predictor_radius(model, bad, data) > 1.0
     model.focus = "prediction"  # keep _after_fit from repairing it
     with pytest.warns(UnstablePredictorWarning, match="spectral radius"):
         model._after_fit(data, None)
@@ -429,7 +431,7 @@ def test_tdl_start_runs_exactly_as_its_tdl(p, m, hidden, activation, delay):
     # The realisation holds in any internal units of the state-space model.
     model._y_mean, model._y_scale = model._y_mean + 0.7, model._y_scale * 3.0
     model._x_mean, model._x_scale = model._x_mean - 0.4, model._x_scale * 0.5
-    model.coefs_, _ = model._realise_tdl(model.tdl_)
+    model.coefs_, _ = realise_tdl(model, model.tdl_)
     np.testing.assert_allclose(model.simulate(Xn), model.tdl_.simulate(Xn), atol=1e-9)
     np.testing.assert_allclose(
         model.predict(Xn, yn), model.tdl_.predict(Xn, yn), atol=1e-9

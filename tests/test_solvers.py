@@ -11,7 +11,7 @@ from scipy.signal import lfilter
 
 from sysid_nn import ISSMRegressor, TDLRegressor
 from sysid_nn._base import _FREE_RUN
-from sysid_nn._issm import _Restricted
+from sysid_nn._innovation import RestrictedObjective
 from sysid_nn._solvers import _STALL_IMPROVEMENT, _Objective, _solve_lm
 
 
@@ -167,7 +167,7 @@ def test_restricted_normal_equations_are_those_of_the_subset():
     est, data, w = _fitted("issm", 2, alpha=1e-2)
     objective = _objective(est, data, 1)
     idx = est._innovation_index()
-    sub = _Restricted(objective, w, idx)
+    sub = RestrictedObjective(objective, w, idx)
     J = objective.jacobian(w)[:, idx]
     r = objective.residuals(w)
     JtJ, Jtr = sub.normal_equations(w[idx])

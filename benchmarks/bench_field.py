@@ -1,0 +1,376 @@
+"""The toolbox on the community's benchmarks, next to the published results.
+
+For every benchmark of :mod:`sysid_nn.datasets` (Silverbox, Wiener-Hammerstein
+2009, Cascaded Tanks, EMPS, and the Bouc-Wen benchmark generated from its
+specification) and every model configuration below, fits on the official
+training data (the estimators hold out the last fifth of it for validation,
+their default ``validation_fraction=0.2``), simulates each test record from
+rest and reports the RMSE after the benchmark's initialisation window
+(``n_skip`` samples), as the community's submissions do, and the fit time.
+The Bouc-Wen multisine test is one steady-state period: the model runs from
+rest over its input repeated twice and is scored on the second period.
+
+Each (benchmark, model) row is stored in ``results_field.csv`` and the
+Markdown table ``results_field.md`` is rebuilt from all stored rows, so one
+benchmark or one model can be rerun alone::
+
+    python benchmarks/bench_field.py                       # everything
+    python benchmarks/bench_field.py --only silverbox      # one benchmark
+    python benchmarks/bench_field.py --only emps --models tdl,linear
+    python benchmarks/bench_field.py --select-order --only wiener_hammerstein
+    python benchmarks/bench_field.py --validation split --only emps
+
+``--select-order`` measures which lags each benchmark needs instead: the
+training record is cut into four consecutive experiments and
+``GridSearchCV`` (4-fold, by experiment, scored on the NRMSE of the free run)
+chooses the lags of the linear model; the chosen model is then refitted on
+the whole record and scored on the test records like the others. Results go
+to ``results_field_order.md``.
+
+The measured benchmarks are read with the ``sysid_nn.datasets`` loaders
+(``pip install "sysid_nn[benchmarks]"``) from ``--data-home`` (default: the
+loaders' data directory, ``SYSID_NN_DATA`` or ``~/sysid_nn_data``); they are
+downloaded there on first use.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import platform
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.model_selection import GridSearchCV, KFold
+
+from sysid_nn import ISSMRegressor, TDLRegressor, datasets
+from sysid_nn.metrics import make_simulation_scorer
+
+HERE = Path(__file__).resolve().parent
+CSV = HERE / "results_field.csv"
+MD = HERE / "results_field.md"
+#: With ``--validation split``: the last fifth passed as ``X_val``, apart.
+SPLIT_CSV = HERE / "results_field_split.csv"
+SPLIT_MD = HERE / "results_field_split.md"
+ORDER_MD = HERE / "results_field_order.md"
+#: Lags tried by --select-order (output and input lags equal).
+LAGS = (1, 2, 3, 4, 6, 8, 10)
+SEED = 0
+
+#: Benchmark name -> (loader, output unit, scale from SI to that unit).
+BENCHMARKS = {
+    "cascaded_tanks": (datasets.fetch_cascaded_tanks, "V", 1.0),
+    "emps": (datasets.fetch_emps, "m", 1.0),
+    "silverbox": (datasets.fetch_silverbox, "mV", 1e3),
+    "boucwen": (
+        lambda data_home: datasets.make_boucwen_benchmark(random_state=SEED),
+        "m",
+        1.0,
+    ),
+    "wiener_hammerstein": (datasets.fetch_wiener_hammerstein, "mV", 1e3),
+}
+
+#: Model name -> (label, factory). The defaults, and the linear model.
+MODELS = {
+    "tdl": ("TDLRegressor()", lambda: TDLRegressor(random_state=SEED)),
+    "issm": ("ISSMRegressor()", lambda: ISSMRegressor(random_state=SEED)),
+    "linear": (
+        "TDLRegressor(hidden_layer_sizes=())",
+        lambda: TDLRegressor(hidden_layer_sizes=(), random_state=SEED),
+    ),
+}
+
+#: Best published black-box simulation RMSE and other references, per test.
+PUBLISHED = {
+    ("boucwen", "multisine"): (
+        "7.53e-6 (gr-SS-NN, tabulated by Iacob et al. 2025)",
+        "PNLSS 1.2-1.9e-5; dynoNet 4.52e-5; linear ARX about 1.6e-4",
+    ),
+    ("silverbox", "multisine"): ("", "LSTM 1.50 (Champneys et al. 2024)"),
+    ("silverbox", "arrow_no_extrapolation"): (
+        "0.31 (SUBNET, Beintema et al. 2021)",
+        "",
+    ),
+    ("silverbox", "arrow_full"): ("", "LSTM 2.68 (Champneys et al. 2024)"),
+    ("wiener_hammerstein", "test"): (
+        "0.24 (SUBNET)",
+        "NL-LFR 0.29; dynoNet 1.2; GRU 3.97",
+    ),
+    ("cascaded_tanks", "test"): (
+        "0.22 (continuous-time SUBNET, best of 17; median about 0.30)",
+        "grey box 0.18; GRU 0.40; linear about 0.75",
+    ),
+    ("emps", "test"): ("LSTM 0.074, RNN 0.089 (Champneys et al. 2024)", ""),
+}
+
+FIELDS = ["benchmark", "model", "label", "test", "unit", "rmse", "fit_s", "warnings"]
+
+
+def _simulate(model, X, name: str, benchmark: str, n_period: int):
+    """Free run from rest; a periodic test is run twice and the last period kept."""
+    if benchmark == "boucwen" and name == "multisine":
+        return model.simulate(np.tile(X, (2, 1)))[-n_period:]
+    return model.simulate(X)
+
+
+def _fit(model, data, validation: str):
+    """Fit on the training record; ``"split"`` validates on its last fifth alone.
+
+    ``"tail"`` is the estimators' default for one record: the last fifth is
+    held out but judged within a free run over the whole record. ``"split"``
+    passes it as ``X_val``, a separate experiment simulated from rest.
+    """
+    if validation == "tail":
+        return model.fit(data.X_train, data.y_train)
+    X, y = data.X_train[0], data.y_train[0]
+    n = round(0.8 * len(y))
+    return model.fit(X[:n], y[:n], X_val=X[n:], y_val=y[n:])
+
+
+def run_one(benchmark: str, model_name: str, data, validation="tail") -> list[dict]:
+    """Fit one model on one benchmark and score it on every test record."""
+    _, unit, scale = BENCHMARKS[benchmark]
+    label, factory = MODELS[model_name]
+    model = factory()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ConvergenceWarning)
+        start = time.perf_counter()
+        _fit(model, data, validation)
+        fit_s = time.perf_counter() - start
+    kinds = sorted({w.category.__name__ for w in caught})
+    rows = []
+    for name, X, y in zip(data.test_names, data.X_test, data.y_test, strict=True):
+        y_sim = _simulate(model, X, name, benchmark, len(y))
+        err = (y - y_sim)[data.n_skip :]
+        rows.append(
+            {
+                "benchmark": benchmark,
+                "model": model_name,
+                "label": label,
+                "test": name,
+                "unit": unit,
+                "rmse": float(np.sqrt(np.mean(err**2)) * scale),
+                "fit_s": round(fit_s, 1),
+                "warnings": " ".join(kinds),
+            }
+        )
+        print(
+            f"{benchmark:>20} {label:>38} {name:>24}: "
+            f"RMSE {rows[-1]['rmse']:.4g} {unit}, fit {fit_s:.1f} s",
+            flush=True,
+        )
+    return rows
+
+
+def select_order(benchmark: str, data) -> list[str]:
+    """Cross-validate the lags of the linear model; score the chosen one."""
+    _, unit, scale = BENCHMARKS[benchmark]
+    X, y = data.X_train[0], data.y_train[0]
+    chunks = np.array_split(np.arange(len(y)), 4)
+    Xs, ys = [X[c] for c in chunks], [y[c] for c in chunks]
+    search = GridSearchCV(
+        TDLRegressor(hidden_layer_sizes=(), random_state=SEED),
+        # Equal output and input lags: one grid point per value.
+        [{"output_lags": [k], "input_lags": [k]} for k in LAGS],
+        cv=KFold(4),
+        scoring=make_simulation_scorer("nrmse", divergence_score=-1e6),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        start = time.perf_counter()
+        search.fit(Xs, ys)
+        model = search.best_estimator_.fit(data.X_train, data.y_train)
+        elapsed = time.perf_counter() - start
+    cv = " / ".join(
+        f"{k}: {-score:.3f}"
+        for k, score in zip(LAGS, search.cv_results_["mean_test_score"], strict=True)
+    )
+    rmses = []
+    for name, Xt, yt in zip(data.test_names, data.X_test, data.y_test, strict=True):
+        err = (yt - _simulate(model, Xt, name, benchmark, len(yt)))[data.n_skip :]
+        rmses.append(f"{name} {np.sqrt(np.mean(err**2)) * scale:.3g} {unit}")
+    line = (
+        f"| {benchmark} | {search.best_params_['output_lags']} | {cv} | "
+        f"{'; '.join(rmses)} | {elapsed:.0f} |"
+    )
+    print(line, flush=True)
+    return [line]
+
+
+def _load_rows() -> list[dict]:
+    if not CSV.is_file():
+        return []
+    with CSV.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _store(rows: list[dict]) -> None:
+    keep = {(r["benchmark"], r["model"]) for r in rows}
+    old = [r for r in _load_rows() if (r["benchmark"], r["model"]) not in keep]
+    order = {name: i for i, name in enumerate(BENCHMARKS)}
+    tests = {t: i for i, t in enumerate(t for _, t in PUBLISHED)}
+    merged = sorted(
+        [*old, *rows],
+        key=lambda r: (
+            order.get(r["benchmark"], 99),
+            tests.get(r["test"], 99),
+            list(MODELS).index(r["model"]) if r["model"] in MODELS else 99,
+        ),
+    )
+    with CSV.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=FIELDS)
+        writer.writeheader()
+        writer.writerows(merged)
+    _write_markdown(merged)
+
+
+def _write_markdown(rows: list[dict]) -> None:
+    """One line per test record, the models side by side; fit times below."""
+    labels = {name: label for name, (label, _) in MODELS.items()}
+    cells, fits, units = {}, {}, {}
+    for r in rows:
+        key = (r["benchmark"], r["test"])
+        note = "*" if r["warnings"] else ""
+        cells.setdefault(key, {})[r["model"]] = f"{float(r['rmse']):.3g}{note}"
+        fits.setdefault(r["benchmark"], {})[r["model"]] = r["fit_s"]
+        units[key] = r["unit"]
+    held_out = (
+        "passed as a separate validation record (`X_val`, simulated from rest)"
+        if MD == SPLIT_MD
+        else "held out for validation within the record (the estimators' default)"
+    )
+    lines = [
+        "# The toolbox on the community's benchmarks",
+        "",
+        "Test RMSE of a free-run simulation from rest, skipping the benchmark's "
+        "initialisation window (`n_skip` samples), as the community's "
+        "submissions do; one run each, `random_state=0`, trained on the "
+        f"official training record with its last fifth {held_out}. "
+        "The Bouc-Wen data are generated by "
+        "`make_boucwen_benchmark(random_state=0)`; its multisine test period is "
+        "simulated twice from rest and the second period scored. Published "
+        "results: best black-box simulation RMSE in the literature. `*`: the fit "
+        "raised a warning (mostly `ConvergenceWarning`: the iteration budget "
+        "ended before the tolerance). Written by `benchmarks/bench_field.py`.",
+        "",
+        "| benchmark | test | unit | "
+        + " | ".join(labels[m] for m in MODELS)
+        + " | best published | others |",
+        "|---|---|---|" + "---|" * len(MODELS) + "---|---|",
+    ]
+    for (benchmark, test), by_model in cells.items():
+        best, others = PUBLISHED.get((benchmark, test), ("", ""))
+        values = " | ".join(by_model.get(m, "") for m in MODELS)
+        lines.append(
+            f"| {benchmark} | {test} | {units[(benchmark, test)]} | {values} | "
+            f"{best} | {others} |"
+        )
+    lines += [
+        "",
+        f"Fit times in seconds ({platform.machine()}, Python "
+        f"{platform.python_version()}, {os.cpu_count()} cores shared with other "
+        "jobs; fits run with the estimators' default single job). The times grow "
+        "with the machine's load: on a loaded machine they can be several "
+        "times the idle ones, so compare times only within one run.",
+        "",
+        "| benchmark | " + " | ".join(labels[m] for m in MODELS) + " |",
+        "|---|" + "---|" * len(MODELS),
+    ]
+    for benchmark, by_model in fits.items():
+        values = " | ".join(str(by_model.get(m, "")) for m in MODELS)
+        lines.append(f"| {benchmark} | {values} |")
+    MD.write_text("\n".join(lines) + "\n")
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(
+        "--only",
+        default=",".join(BENCHMARKS),
+        help=f"comma-separated benchmarks among {', '.join(BENCHMARKS)}",
+    )
+    parser.add_argument(
+        "--models",
+        default=",".join(MODELS),
+        help=f"comma-separated models among {', '.join(MODELS)}",
+    )
+    parser.add_argument("--data-home", default=None, help="data directory")
+    parser.add_argument(
+        "--validation",
+        choices=["tail", "split"],
+        default="tail",
+        help="tail: the estimators' default validation on one record; split: "
+        "the last fifth as a separate X_val (results_field_split.*)",
+    )
+    parser.add_argument(
+        "--report",
+        action="store_true",
+        help="only rebuild results_field.md from results_field.csv",
+    )
+    parser.add_argument(
+        "--select-order",
+        action="store_true",
+        help="cross-validate the linear model's lags instead",
+    )
+    args = parser.parse_args(argv)
+    benchmarks = [b for b in args.only.split(",") if b]
+    models = [m for m in args.models.split(",") if m]
+    unknown = set(benchmarks) - set(BENCHMARKS) | set(models) - set(MODELS)
+    if unknown:
+        parser.error(f"unknown benchmark or model: {', '.join(sorted(unknown))}")
+    if args.validation == "split":
+        global CSV, MD
+        CSV, MD = SPLIT_CSV, SPLIT_MD
+    if args.report:
+        _store([])
+        print(MD.read_text())
+        return
+    lines = []
+    for benchmark in benchmarks:
+        loader = BENCHMARKS[benchmark][0]
+        data = loader(data_home=args.data_home)
+        if args.select_order:
+            lines += select_order(benchmark, data)
+            continue
+        for model_name in models:
+            _store(run_one(benchmark, model_name, data, args.validation))
+    if args.select_order:
+        header = [
+            "# Model order of the linear model, chosen by cross-validation",
+            "",
+            "Training record cut into 4 consecutive experiments, 4-fold "
+            "`GridSearchCV` of `TDLRegressor(hidden_layer_sizes=())` over equal "
+            "output and input lags, scored by the NRMSE of the free run; the "
+            "chosen model refitted on the whole record and scored on the test "
+            "records (RMSE after the initialisation window).",
+            "",
+            "| benchmark | chosen lags | CV NRMSE per lags | test RMSE | time (s) |",
+            "|---|---|---|---|---|",
+        ]
+        # Keep the rows of the benchmarks not rerun this time.
+        done = {line.split("|")[1].strip() for line in lines}
+        kept = [
+            line
+            for line in (
+                ORDER_MD.read_text().splitlines() if ORDER_MD.is_file() else []
+            )
+            if line.startswith("| ")
+            and line.split("|")[1].strip() in BENCHMARKS
+            and line.split("|")[1].strip() not in done
+        ]
+        order = list(BENCHMARKS)
+        rows = sorted(
+            [*kept, *lines], key=lambda r: order.index(r.split("|")[1].strip())
+        )
+        ORDER_MD.write_text("\n".join([*header, *rows]) + "\n")
+        print(ORDER_MD.read_text())
+        return
+    print(MD.read_text())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,104 @@
+"""Docstring sections the recurrent-network estimators share, written once.
+
+:data:`document_estimator` fills them in as ``%(name)s`` (see
+:func:`sysid_nn._docstrings.fill_doc`).
+"""
+
+from __future__ import annotations
+
+from sysid_nn._docstrings import fill_doc
+
+#: Parameter descriptions shared by the estimators' docstrings.
+_TRAINING_PARAMETERS_DOC = """\
+solver : {"lm", "lbfgs", "slsqp"}, default="lm"
+    ``"lm"``: Levenberg-Marquardt on the exact recurrent Jacobian
+    (forward sensitivities), with Marquardt's scale-invariant damping;
+    ``"lbfgs"``: L-BFGS-B with the adjoint (backpropagation-through-time)
+    gradient; ``"slsqp"``: sequential quadratic programming as in the
+    paper, with the adjoint gradient.
+max_iter : int, default=150
+    Iterations of the last training stage; the one-step and each shooting
+    stage get 2/3 and 4/15 of it.
+tol : float, default=1e-8
+    Relative tolerance of the solver: a stage ends when the loss changes
+    by less than ``tol`` times its value (or the gradient or step become
+    that small).
+n_init : int, default=4
+    Random restarts; the one with the best validation (or training) loss
+    is kept.
+early_stopping : bool, default=True
+    Keep, over all accepted steps of all stages, the weights with the best
+    validation loss (free run for the simulation focus, one step for the
+    prediction focus) and stop the last stage after ``n_iter_no_change``
+    steps without improvement.
+validation_fraction : float, default=0.2
+    Share of the sequences held out when ``early_stopping`` is on and no
+    ``X_val`` is given; with one or two sequences, the share of the last
+    one's tail, scored within a free run over its whole record.
+n_iter_no_change : int, default=30
+    Patience of early stopping, in accepted steps.
+random_state : int, RandomState instance or None, default=None
+    Seeds the restarts' initial weights.
+verbose : bool, default=False
+    Print progress per stage.
+n_jobs : int, default=None
+    Parallel jobs for the restarts (joblib semantics)."""
+
+
+#: Entries of the prediction methods' docstrings, shared by all of them.
+_EXCITATION_DOC = """\
+X : array-like of shape (n_samples, n_inputs) or list of such
+    Excitation."""
+_SIMULATION_STD_DOC = """\
+return_std : bool, default=False
+    Also return the standard deviation of every sample (delta
+    method, see :ref:`uncertainty`).
+interval : {"prediction", "confidence"}, default="prediction"
+    What the standard deviation is of (only used with
+    ``return_std``): ``"prediction"``, a new measurement (weight
+    uncertainty plus ``noise_variance_``); ``"confidence"``, the
+    model output (weight uncertainty only).
+
+Returns
+-------
+y_sim : ndarray or list of ndarray
+    Simulated response; NaN from a sample where the run diverged (a
+    :class:`~sysid_nn.DivergenceWarning` says where).
+y_std : ndarray or list of ndarray
+    Standard deviation of each value of ``y_sim``, same shape; only
+    with ``return_std=True``."""
+
+#: Fitted attributes the estimators share: those of the restarts' selection
+#: and those of the residual variances.
+_SELECTION_ATTRIBUTES_DOC = """\
+best_validation_score_ : float or None
+    Negative validation mean squared error (standardised) of the chosen
+    weights.
+restart_scores_ : ndarray
+    Negative selection loss of every restart.
+fit_time_ : float
+    Seconds spent in training."""
+_VARIANCE_ATTRIBUTES_DOC = """\
+n_effective_params_ : float
+    Effective number of weights the data determine (the trace of the
+    hat matrix), used to correct the residual variances.
+noise_variance_ : ndarray of shape (n_outputs,)
+    Residual variance of the free run on the training records (user's
+    units), corrected for ``n_effective_params_``.
+one_step_noise_variance_ : ndarray of shape (n_outputs,)
+    The same for the one-step predictor.
+feature_names_in_ : ndarray
+    Column names of ``X`` when it was a DataFrame."""
+
+#: Fills the estimators' shared docstring sections: ``%(training_parameters)s``,
+#: ``%(selection_attributes)s`` and ``%(variance_attributes)s`` in the class
+#: docstring, ``%(excitation)s`` and ``%(simulation_std)s`` (the
+#: ``return_std``/``interval`` entries and the Returns of ``simulate``) in
+#: the methods'.
+document_estimator = fill_doc(
+    training_parameters=_TRAINING_PARAMETERS_DOC,
+    excitation=_EXCITATION_DOC,
+    simulation_std=_SIMULATION_STD_DOC,
+    selection_attributes=_SELECTION_ATTRIBUTES_DOC,
+    variance_attributes=_VARIANCE_ATTRIBUTES_DOC,
+)

@@ -1,0 +1,146 @@
+"""Linear starting point of the ISSM: an ARX model realised in state space.
+
+An ``init="arx"`` model starts with its linear part exactly at a linear
+innovation model fitted to the training data: a least-squares ARX model, its
+observer-form states along the data, mapped to the model's state coordinates
+(measured outputs first, the others by variance), and a least-squares linear
+innovation model on those states. The functions take the estimator being
+fitted (its sizes, delay and standardised data).
+"""
+
+from __future__ import annotations
+
+from itertools import pairwise
+from math import ceil
+
+import numpy as np
+from sklearn.utils import Bunch
+
+from sysid_nn._base import _Data
+
+#: Output and input lags of the ARX model the linear part starts from, and
+#: of the TDL network an ``init="tdl"`` model starts from.
+ARX_LAGS = 3
+
+
+def arx_lags(est) -> int:
+    """Lags of the ARX fit the linear start is realised from."""
+    return max(ARX_LAGS, ceil(est.n_states_ / est.n_outputs_))
+
+
+def linear_start(est, data: _Data) -> Bunch:
+    """The linear innovation model ``A, B, K, c`` fitted to ``data``."""
+    p, n, nk = est.n_outputs_, est.n_states_, est.input_delay
+    lags = arx_lags(est)
+    A_i, B_j, c, rows = arx(est, data, lags)
+    # Observer-form ARX states along the data: block i is the part of
+    # the prediction of y(t + i) already fixed by data up to t - 1, so
+    # block 0 is the one-step prediction yhat(t).
+    xi = np.zeros((len(rows), lags * p))
+    for i in range(lags):
+        for j in range(i, lags):
+            xi[:, i * p : (i + 1) * p] += data.Y[rows - 1 - j + i] @ A_i[j].T
+            xi[:, i * p : (i + 1) * p] += data.U[rows - nk - j + i] @ B_j[j].T
+    xi[:, :p] += c
+    x = xi @ state_coordinates(xi, p, n).T
+    # Zero of the unmeasured states: their mean where the training
+    # records start (the rest state for records that start at rest).
+    first = np.flatnonzero(np.diff(rows, prepend=-2) != 1)
+    x[:, p:] -= x[first, p:].mean(axis=0)
+    return fit_linear_model(est, data, rows, x)
+
+
+def arx(est, data: _Data, lags: int):
+    """Least-squares ARX fit ``y(t) = sum A_i y(t-i) + sum B_j u(t-nk-j) + c``.
+
+    Only rows whose lags lie in the measured part of a sequence are used.
+    Returns ``(A_list, B_list, c, rows)``.
+    """
+    p, nk = est.n_outputs_, est.input_delay
+    rows = []
+    for a, b in pairwise(data.starts):
+        first = a + data.h + max(lags, nk + lags - 1)
+        rows.append(np.arange(first, b))
+    rows = np.concatenate(rows)
+    phi = arx_regressors(est, data, rows, lags)
+    theta = np.zeros((phi.shape[1] + 1, p))
+    if len(rows):
+        design = np.hstack([phi, np.ones((len(rows), 1))])
+        theta, *_ = np.linalg.lstsq(design, data.Y[rows], rcond=None)
+    m = est.n_features_in_
+    A = [theta[i * p : (i + 1) * p].T for i in range(lags)]
+    B = [theta[lags * p + j * m : lags * p + (j + 1) * m].T for j in range(lags)]
+    return A, B, theta[-1], rows
+
+
+def arx_regressors(est, data: _Data, rows: np.ndarray, lags: int) -> np.ndarray:
+    """The ARX regressors of ``rows``: ``lags`` past outputs, then inputs."""
+    nk = est.input_delay
+    blocks = [data.Y[rows - i] for i in range(1, lags + 1)]
+    blocks += [data.U[rows - nk - j] for j in range(lags)]
+    return np.hstack(blocks) if blocks else np.empty((len(rows), 0))
+
+
+def fit_linear_model(est, data: _Data, rows: np.ndarray, x: np.ndarray) -> Bunch:
+    """Least-squares linear innovation model on the ARX-derived states.
+
+    ``x(t) = A [y(t-1); x_u(t-1)] + B u(t-nk) + c`` with ``x_u`` the
+    unmeasured states, i.e. ``K = A H^T`` in
+    ``x(t) = A x(t-1) + B u(t-nk) + K e(t-1) + c``.
+    """
+    p, n, m = est.n_outputs_, est.n_states_, est.n_features_in_
+    pairs = np.flatnonzero(np.diff(rows) == 1) + 1
+    t = rows[pairs]
+    # K = A H^T: the one-step predictor feeds the measured outputs in
+    # place of the measured states. A free least-squares K made the
+    # reduced predictor unstable on the hysteretic oscillator.
+    design = np.hstack(
+        [
+            data.Y[t - 1],
+            x[pairs - 1, p:],
+            data.U[t - est.input_delay],
+            np.ones((len(t), 1)),
+        ]
+    )
+    theta = np.zeros((design.shape[1], n))
+    if len(t):
+        theta, *_ = np.linalg.lstsq(design, x[pairs], rcond=None)
+    A, B = theta[:n].T, theta[n : n + m].T
+    K = A[:, :p].copy()
+    return Bunch(A=A, B=B, K=K, c=theta[-1])
+
+
+def state_coordinates(xi: np.ndarray, p: int, n: int) -> np.ndarray:
+    """Fixed map ``x = T xi`` from observer-form to model states.
+
+    The first ``p`` states are the predicted outputs themselves; the
+    others are the remaining observer-form directions with the part
+    explained by the outputs removed (least-squares residual), ordered by
+    variance along the training data and scaled to unit variance.
+    Directions beyond ``n`` are dropped.
+    """
+    N = xi.shape[1]
+    T = np.zeros((n, N))
+    T[:p, :p] = np.eye(p)
+    if len(xi) > 1:
+        centred = xi - xi.mean(axis=0)
+        out, rest = centred[:, :p], centred[:, p:]
+        C, *_ = np.linalg.lstsq(out, rest, rcond=None)  # rest ~ out @ C
+        resid = rest - out @ C
+    else:
+        C, resid = np.zeros((p, N - p)), np.zeros((1, N - p))
+    var, V = np.linalg.eigh(resid.T @ resid / max(1, len(resid)))
+    var, V = var[::-1][: n - p], V[:, ::-1][:, : n - p]
+    # Directions the data barely excite (an ARX of higher order than the
+    # system) keep a bounded scale instead of blowing up.
+    total = float(np.var(xi, axis=0).sum()) if len(xi) > 1 else 1.0
+    var = np.maximum(var, max(1e-8 * var.max(initial=0.0), 1e-12 * total, 1e-300))
+    W = V.T / np.sqrt(var)[:, None]
+    T[p:, p:] = W
+    T[p:, :p] = -W @ C.T
+    return T
+
+
+def linear_blocks(L: np.ndarray, c: np.ndarray, n: int, m: int) -> Bunch:
+    """``A, B, K, c`` of a linear part ``L = [A B K]`` on ``[x, F, E]``."""
+    return Bunch(A=L[:, :n], B=L[:, n : n + m], K=L[:, n + m :], c=c)
