@@ -35,7 +35,7 @@ validation_fraction : float, default=0.2
     Share of the sequences held out when ``early_stopping`` is on and no
     ``X_val`` is given; with one or two sequences, the share of the last
     one's tail, scored within a free run over its whole record.
-n_iter_no_change : int, default=30
+n_iter_no_change : int, default=10
     Patience of early stopping, in accepted steps.
 random_state : int, RandomState instance or None, default=None
     Seeds the restarts' initial weights.

@@ -228,7 +228,7 @@ class ISSMRegressor(_RecurrentRegressorBase):
         n_init=4,
         early_stopping=True,
         validation_fraction=0.2,
-        n_iter_no_change=30,
+        n_iter_no_change=10,
         random_state=None,
         verbose=False,
         n_jobs=None,
