@@ -48,7 +48,7 @@ _SHOOTING_SHARE = 4.0 / 15.0
 _FREE_RUN = np.iinfo(np.int64).max // 4
 #: The stages before the last end when Levenberg-Marquardt's cost stalls over
 #: this many accepted steps (see ``sysid_nn._solvers._solve_lm``), not only at
-#: their budget. Measured on the accuracy benchmark and a 11 x 7200 sample
+#: their budget. Measured on the accuracy benchmark and an 11 x 7200 sample
 #: record set, the stages still gained 1-30 % per 10 steps at their budget, so
 #: this rarely ends them; a looser threshold (5 %) made the ISSM less accurate.
 _STALL_STEPS = 10
