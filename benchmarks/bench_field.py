@@ -254,8 +254,10 @@ def _write_markdown(rows: list[dict]) -> None:
         "`make_boucwen_benchmark(random_state=0)`; its multisine test period is "
         "simulated twice from rest and the second period scored. Published "
         "results: best black-box simulation RMSE in the literature. `*`: the fit "
-        "raised a warning (mostly `ConvergenceWarning`: the iteration budget "
-        "ended before the tolerance). Written by `benchmarks/bench_field.py`.",
+        "raised warnings, named per row in the `warnings` column of "
+        "`results_field.csv` (e.g. `ConvergenceWarning`: a budget ended before "
+        "the tolerance; `UserWarning`: the output noise `fit` estimated). "
+        "Written by `benchmarks/bench_field.py`.",
         "",
         "| benchmark | test | unit | "
         + " | ".join(labels[m] for m in MODELS)
