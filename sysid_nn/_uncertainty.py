@@ -21,6 +21,7 @@ out.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import warnings
 from dataclasses import dataclass
 from itertools import pairwise
@@ -70,25 +71,21 @@ class _Normal:
     bandwidth: int
 
 
-def _normal_matrix(est, w, data, seg, cols=None) -> _Normal | None:
+def _normal_matrix(est, w, data, seg) -> _Normal | None:
     """``J^T J`` of a run and the long-run covariance of its gradient terms.
 
     The one place where the full Jacobian of the training data is formed;
-    a memory-bounded accumulation can replace it (every term is a sum over
-    rows, or over windows of consecutive rows). Returns ``None`` if the run
-    diverges.
+    past :data:`_FULL_JACOBIAN_LIMIT` :func:`_accumulated_normal` serves
+    instead. Returns ``None`` if the run diverges.
     """
     rows = data.modelled
-    n_w = len(w) if cols is None else len(cols)
     if len(rows) * est.n_outputs_ * len(w) > _FULL_JACOBIAN_LIMIT:
-        return _accumulated_normal(est, w, data, seg, cols)
+        return _accumulated_normal(est, w, data, seg)
     Yhat, J, diverged, _ = est._run(w, data, seg, True)
     if (diverged >= 0).any():
         return None
-    if cols is not None:
-        J = J[:, cols]
     R = Yhat[rows] - data.Y[rows]
-    p = R.shape[1]
+    p, n_w = R.shape[1], J.shape[1]
     # Gradient term of each time step, summed over the outputs.
     G = (R.reshape(-1, 1) * J).reshape(len(rows), p, n_w).sum(axis=1)
     lengths = np.diff(data.starts) - data.h
@@ -107,7 +104,7 @@ def _normal_matrix(est, w, data, seg, cols=None) -> _Normal | None:
     )
 
 
-def _accumulated_normal(est, w, data, seg, cols) -> _Normal | None:
+def _accumulated_normal(est, w, data, seg) -> _Normal | None:
     """:class:`_Normal` of a run too long for its full Jacobian.
 
     ``J^T J`` is accumulated by the kernels while the recurrence runs, as
@@ -121,8 +118,6 @@ def _accumulated_normal(est, w, data, seg, cols) -> _Normal | None:
         return None
     rows = data.modelled
     R = Yhat[rows] - data.Y[rows]
-    if cols is not None:
-        JtJ = JtJ[np.ix_(cols, cols)]
     rss = (R * R).sum(axis=0)
     warnings.warn(
         f"The training records of this {type(est).__name__} hold {len(rows)} "
@@ -142,6 +137,16 @@ def _accumulated_normal(est, w, data, seg, cols) -> _Normal | None:
         max_sensitivity=np.nan,
         bandwidth=0,
     )
+
+
+def _restricted(normal: _Normal, idx) -> _Normal:
+    """``normal`` of the weights ``idx`` alone, the others held fixed.
+
+    Every field is a sum of products of Jacobian columns, so the block of the
+    full run is exactly what a run restricted to those columns gives.
+    """
+    block = np.ix_(idx, idx)
+    return dataclasses.replace(normal, JtJ=normal.JtJ[block], meat=normal.meat[block])
 
 
 def _bandwidth(R, bounds) -> int:
@@ -287,9 +292,7 @@ def fit_covariance(est, train) -> None:
     innovations = getattr(est, "_innovation_index", None)
     if innovations is not None and est._final_segment() != 1 and one is not None:
         idx = innovations()
-        cov_k, n_k = _delta_covariance(
-            _normal_matrix(est, w, train, 1, idx), alpha * mask[idx], p
-        )
+        cov_k, n_k = _delta_covariance(_restricted(one, idx), alpha * mask[idx], p)
         cov[idx, :] = 0.0
         cov[:, idx] = 0.0
         cov[np.ix_(idx, idx)] = cov_k
