@@ -599,7 +599,9 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         """
         start = self._initial_params(np.random.RandomState(0))
         finite = all(
-            not (self._run(start, data, _FREE_RUN, False)[2] >= 0).any()
+            not (
+                self._run(start, data, _FREE_RUN, False, keep_state=False)[2] >= 0
+            ).any()
             for data in (train, val)
             if data is not None
         )
@@ -778,7 +780,9 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
 
         Returns ``(Yhat, J or None, diverged)``.
         """
-        Yhat, J, diverged, _ = self._run(self.coefs_, data, _FREE_RUN, want_jac)
+        Yhat, J, diverged, _ = self._run(
+            self.coefs_, data, _FREE_RUN, want_jac, keep_state=False
+        )
         return Yhat, J, diverged
 
     def _initial_units(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
@@ -896,7 +900,7 @@ default=None
         y_pred = self._unstack(Yhat, data, as_list, y_1d)
         if not return_std:
             return y_pred
-        J = self._run(self.coefs_, data, 1, True)[1]
+        J = self._run(self.coefs_, data, 1, True, keep_state=False)[1]
         std = _uncertainty.output_std(
             self, Yhat, J, data, as_list, y_1d, interval, one_step=True
         )
@@ -1097,7 +1101,9 @@ class _Tracker:
     def __call__(self, w) -> None:
         if self.val is None:
             return
-        Yhat, _, diverged, _ = self.est._run(w, self.val, self.seg, False)
+        Yhat, _, diverged, _ = self.est._run(
+            w, self.val, self.seg, False, keep_state=False
+        )
         rows = self.val.scored
         loss = np.inf
         if not (diverged >= 0).any():

@@ -409,7 +409,7 @@ default=None
     def _free_run(self, data, initial, want_jac=False):
         X0 = self._initial_states(data, initial)
         Yhat, J, diverged, _ = self._run_from(
-            self.coefs_, data, _FREE_RUN, want_jac, X0
+            self.coefs_, data, _FREE_RUN, want_jac, X0, keep_state=False
         )
         return Yhat, J, diverged
 

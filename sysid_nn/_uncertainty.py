@@ -81,7 +81,7 @@ def _normal_matrix(est, w, data, seg) -> _Normal | None:
     rows = data.modelled
     if len(rows) * est.n_outputs_ * len(w) > _FULL_JACOBIAN_LIMIT:
         return _accumulated_normal(est, w, data, seg)
-    Yhat, J, diverged, _ = est._run(w, data, seg, True)
+    Yhat, J, diverged, _ = est._run(w, data, seg, True, keep_state=False)
     if (diverged >= 0).any():
         return None
     R = Yhat[rows] - data.Y[rows]
