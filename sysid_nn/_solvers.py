@@ -111,6 +111,21 @@ class _Objective:
             Jtr[idx] += self.est.alpha / n * w[idx]
         return JtJ, Jtr
 
+    def start(self, w):
+        """The solver's parameter vector of the weights ``w`` (the weights)."""
+        return w
+
+    def weights(self, theta):
+        return theta
+
+    def track(self, tracker):
+        return tracker
+
+    def damped_step(self, A, g, mu):
+        """The step ``-(A + mu diag(d))^-1 g``; returns ``(step, d)``."""
+        d = _damping(np.diag(A))
+        return -np.linalg.solve(A + mu * np.diag(d), g), d
+
     def loss(self, w):
         r = self.residuals(w)
         return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf
@@ -157,9 +172,8 @@ def _solve_lm(objective, w, iters, tol, tracker, stall=None):
         while n_eval < iters:
             if np.max(np.abs(g)) <= tol * max(1.0, cost):
                 return w, n_eval, True
-            d = np.maximum(np.diag(A), 1e-12 * max(1.0, np.max(np.diag(A))))
             try:
-                step = -np.linalg.solve(A + mu * np.diag(d), g)
+                step, d = objective.damped_step(A, g, mu)
             except np.linalg.LinAlgError:
                 mu, nu = mu * nu, nu * 2.0
                 n_eval += 1
@@ -191,6 +205,11 @@ def _solve_lm(objective, w, iters, tol, tracker, stall=None):
     except _EarlyStop:
         return w, n_eval, True
     return w, n_eval, False
+
+
+def _damping(diag: np.ndarray) -> np.ndarray:
+    """Marquardt's damping scale: ``diag(J'J)``, floored for flat directions."""
+    return np.maximum(diag, 1e-12 * max(1.0, np.max(diag)))
 
 
 def _stalled(costs, stall):
