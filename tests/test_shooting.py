@@ -18,19 +18,17 @@ def _system(n, seed):
     return u, lfilter([0.0, 1e-3], [1.0, -1.98, 0.9891], u[:, 0])
 
 
+def _net(**params):
+    defaults = dict(output_lags=2, input_lags=2, hidden_layer_sizes=(3,))
+    defaults.update(n_init=1, random_state=0)
+    defaults.update(params)
+    return TDLRegressor(**defaults)
+
+
 def _objective(seg_len=40, alpha=0.0):
     u, y = _system(300, 0)
-    est = TDLRegressor(
-        output_lags=2,
-        input_lags=2,
-        hidden_layer_sizes=(3,),
-        n_init=1,
-        max_iter=3,
-        alpha=alpha,
-        shooting="measured",
-        early_stopping=False,
-        random_state=0,
-    ).fit(u, y)
+    est = _net(max_iter=3, alpha=alpha, shooting="measured", early_stopping=False)
+    est.fit(u, y)
     train = est._stack([u], [y[:, None]])
     n_res = len(train.modelled)
     mask = est._penalty_mask()
@@ -133,19 +131,17 @@ def _butter_low(edge):
 def test_auto_shooting_follows_the_noise_and_the_solver():
     u, y = _system(1500, 0)
     noisy = y + 0.01 * y.std() * np.random.default_rng(1).standard_normal(len(y))
-    params = dict(output_lags=2, input_lags=2, hidden_layer_sizes=(3,), n_init=1)
-    params.update(max_iter=2, random_state=0)
-    assert TDLRegressor(**params).fit(u, y).shooting_ == "measured"
+    assert _net(max_iter=2).fit(u, y).shooting_ == "measured"
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)  # handled: no noise warning
         warnings.simplefilter("ignore", ConvergenceWarning)
-        assert TDLRegressor(**params).fit(u, noisy).shooting_ == "free"
-    lbfgs = TDLRegressor(solver="lbfgs", **params)
+        assert _net(max_iter=2).fit(u, noisy).shooting_ == "free"
+    lbfgs = _net(max_iter=2, solver="lbfgs")
     with pytest.warns(UserWarning, match="shooting='auto' or 'free'"):
         assert lbfgs.fit(u, noisy).shooting_ == "measured"
-    with pytest.raises(ValueError, match="shooting='free' .* needs solver='lm'"):
-        TDLRegressor(shooting="free", solver="lbfgs", **params).fit(u, y)
-    forced = TDLRegressor(shooting="free", **params).fit(u, y)
+    with pytest.raises(ValueError, match=r"shooting='free' .* needs solver='lm'"):
+        _net(max_iter=2, shooting="free", solver="lbfgs").fit(u, y)
+    forced = _net(max_iter=2, shooting="free").fit(u, y)
     assert forced.shooting_ == "free"
     assert forced._smooth_train is None  # the low-passed copy is not kept
 
@@ -158,14 +154,7 @@ def test_free_shooting_stays_accurate_under_output_noise():
     ut, yt = _system(2000, 1)
     rng = np.random.default_rng(2)
     noisy = y + 0.03 * y.std() * rng.standard_normal(len(y))
-    est = TDLRegressor(
-        output_lags=2,
-        input_lags=2,
-        hidden_layer_sizes=(5,),
-        n_init=1,
-        max_iter=60,
-        random_state=0,
-    ).fit(u, noisy)
+    est = _net(hidden_layer_sizes=(5,), max_iter=60).fit(u, noisy)
     assert est.shooting_ == "free"
     nrmse = np.sqrt(np.mean((est.simulate(ut) - yt) ** 2)) / yt.std()
     assert nrmse < 0.015
