@@ -226,7 +226,7 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         "focus": [StrOptions({"prediction", "simulation"})],
         "shooting_segments": ["array-like"],
         "solver": [StrOptions({"lm", "lbfgs", "slsqp"})],
-        "alpha": [Interval(numbers.Real, 0, None, closed="left")],
+        "alpha": [Interval(numbers.Real, 0, None, closed="left"), StrOptions({"auto"})],
         "max_iter": [Interval(numbers.Integral, 1, None, closed="left")],
         "tol": [Interval(numbers.Real, 0, None, closed="left")],
         "n_init": [Interval(numbers.Integral, 1, None, closed="left")],
@@ -580,6 +580,8 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         )
         noisy = bool(np.any(ratio > _NOISY_DIFFERENCE))
         self.shooting_ = self._choose_shooting(noisy)
+        auto = self.alpha == "auto"
+        self.alpha_ = self._auto_alpha() if auto else float(self.alpha)
         if self._noise_sensitive() and noisy and self.shooting_ != "free":
             k = int(np.argmax(ratio))
             warnings.warn(
@@ -715,6 +717,10 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         measured outputs.
         """
         return "measured"
+
+    def _auto_alpha(self) -> float:
+        """The weight penalty of ``alpha="auto"``."""
+        return 0.0
 
     def _fit_one(self, train: _Data, val: _Data | None, seed: int, k: int):
         """One restart through the whole schedule; returns a :class:`_Run`."""

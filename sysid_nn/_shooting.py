@@ -103,14 +103,14 @@ class _FreeStateObjective:
     """
 
     def __init__(self, est, data, seg_len, mask, n_res, n_state, start_data=None):
-        self.est, self.mask = est, mask
+        self.est, self.mask, self.seg = est, mask, seg_len
         self.p = data.Y.shape[1]
         self.segments = _segment(data, seg_len, self.p)
         self.n_state = n_state
         self.m = n_state * self.p
         self.n_seg = len(self.segments.first)
         self.n = float(n_res)
-        self.alpha = est.alpha
+        self.alpha = est.alpha_
         src = _segment(start_data, seg_len, self.p) if start_data is not None else None
         Y = (src or self.segments).data.Y
         first = self.segments.first

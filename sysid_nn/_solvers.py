@@ -54,7 +54,7 @@ class _Objective:
         self.est, self.data, self.seg, self.mask = est, data, seg, mask
         self.rows = data.modelled
         self.root_n = np.sqrt(n_res)
-        self.root_alpha = np.sqrt(est.alpha)
+        self.root_alpha = np.sqrt(est.alpha_)
         self.full_jacobian = full_jacobian
         self._cache_w = None
         self._cache_jac = False
@@ -107,8 +107,8 @@ class _Objective:
         JtJ, Jtr = JtJ / n, Jtr / n
         if self.root_alpha > 0:
             idx = np.flatnonzero(self.mask)
-            JtJ[idx, idx] += self.est.alpha / n
-            Jtr[idx] += self.est.alpha / n * w[idx]
+            JtJ[idx, idx] += self.est.alpha_ / n
+            Jtr[idx] += self.est.alpha_ / n * w[idx]
         return JtJ, Jtr
 
     def start(self, w):
@@ -140,8 +140,8 @@ class _Objective:
         loss = 0.5 * float(r @ r) / n
         if self.root_alpha > 0:
             wm = np.where(self.mask, w, 0.0)
-            loss += 0.5 * self.est.alpha / n * float(wm @ wm)
-            grad += self.est.alpha / n * wm
+            loss += 0.5 * self.est.alpha_ / n * float(wm @ wm)
+            grad += self.est.alpha_ / n * wm
         return loss, grad
 
 

@@ -131,11 +131,14 @@ def _butter_low(edge):
 def test_auto_shooting_follows_the_noise_and_the_solver():
     u, y = _system(1500, 0)
     noisy = y + 0.01 * y.std() * np.random.default_rng(1).standard_normal(len(y))
-    assert _net(max_iter=2).fit(u, y).shooting_ == "measured"
+    clean = _net(max_iter=2).fit(u, y)
+    assert (clean.shooting_, clean.alpha_) == ("measured", 0.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)  # handled: no noise warning
         warnings.simplefilter("ignore", ConvergenceWarning)
-        assert _net(max_iter=2).fit(u, noisy).shooting_ == "free"
+        free = _net(max_iter=2).fit(u, noisy)
+        assert (free.shooting_, free.alpha_) == ("free", 0.03)
+        assert _net(max_iter=2, alpha=0.5).fit(u, noisy).alpha_ == 0.5
     lbfgs = _net(max_iter=2, solver="lbfgs")
     with pytest.warns(UserWarning, match="shooting='auto' or 'free'"):
         assert lbfgs.fit(u, noisy).shooting_ == "measured"
