@@ -33,7 +33,12 @@ from sysid_nn import _uncertainty
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._progress import report_stage
 from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
-from sysid_nn._state_estimation import fit_initial_condition, noise_variance
+from sysid_nn._state_estimation import (
+    _FULL_BAND,
+    fit_initial_condition,
+    noise_band,
+    noise_variance,
+)
 from sysid_nn._validation import check_same_width
 
 __all__ = ["DivergenceWarning"]
@@ -579,7 +584,13 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
             else np.zeros_like(var)
         )
         noisy = bool(np.any(ratio > _NOISY_DIFFERENCE))
-        self.shooting_ = self._choose_shooting(noisy)
+        edge = noise_band(train.Y, train.starts, train.h, var) if noisy else 0.5
+        self._band_edge = edge
+        # Free-state shooting needs a band where the outputs clear the noise.
+        # Without one the "noise" is broadband misfit of the linear model (a
+        # strong nonlinearity at coarse sampling), which the one-step
+        # schedule handles.
+        self.shooting_ = self._choose_shooting(noisy and edge < _FULL_BAND * 0.5)
         auto = self.alpha == "auto"
         self.alpha_ = self._auto_alpha() if auto else float(self.alpha)
         if self._noise_sensitive() and noisy and self.shooting_ != "free":

@@ -29,6 +29,11 @@ if TYPE_CHECKING:  # pragma: no cover
 _STALL_IMPROVEMENT = 1e-3
 
 
+#: Levenberg-Marquardt ends a stage once its damping passes this: the step is
+#: then below rounding of any weight.
+_MAX_DAMPING = 1e16
+
+
 class _EarlyStop(Exception):
     """Raised inside a solver callback to end a stage early."""
 
@@ -121,11 +126,6 @@ class _Objective:
     def track(self, tracker):
         return tracker
 
-    def damped_step(self, A, g, mu):
-        """The step ``-(A + mu diag(d))^-1 g``; returns ``(step, d)``."""
-        d = _damping(np.diag(A))
-        return -np.linalg.solve(A + mu * np.diag(d), g), d
-
     def loss(self, w):
         r = self.residuals(w)
         return 0.5 * float(r @ r) if np.all(np.isfinite(r)) else np.inf
@@ -170,10 +170,14 @@ def _solve_lm(objective, w, iters, tol, tracker, stall=None):
     costs = [cost]  # after each accepted step
     try:
         while n_eval < iters:
-            if np.max(np.abs(g)) <= tol * max(1.0, cost):
+            if np.max(np.abs(g)) <= tol * max(1.0, cost) or mu > _MAX_DAMPING:
+                # (Past that damping no step lowers the cost to rounding, and
+                # mu would overflow into NaN steps.)
                 return w, n_eval, True
             try:
-                step, d = objective.damped_step(A, g, mu)
+                # Objectives with block-structured normal equations solve
+                # their own damped system.
+                step, d = getattr(objective, "damped_step", _damped_step)(A, g, mu)
             except np.linalg.LinAlgError:
                 mu, nu = mu * nu, nu * 2.0
                 n_eval += 1
@@ -205,6 +209,12 @@ def _solve_lm(objective, w, iters, tol, tracker, stall=None):
     except _EarlyStop:
         return w, n_eval, True
     return w, n_eval, False
+
+
+def _damped_step(A, g, mu):
+    """The step ``-(A + mu diag(d))^-1 g``; returns ``(step, d)``."""
+    d = _damping(np.diag(A))
+    return -np.linalg.solve(A + mu * np.diag(d), g), d
 
 
 def _damping(diag: np.ndarray) -> np.ndarray:

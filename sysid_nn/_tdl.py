@@ -14,7 +14,7 @@ from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
 from sysid_nn._shooting import _FreeStateObjective
-from sysid_nn._state_estimation import lowpass, noise_band
+from sysid_nn._state_estimation import lowpass
 
 __all__ = ["TDLRegressor"]
 
@@ -337,8 +337,7 @@ such, default=None
             # The linear start and the lag scaling from the band where the
             # outputs clear the noise: at fine sampling the measured second
             # difference is mostly noise.
-            edge = noise_band(data.Y, data.starts, data.h, self._noise_var)
-            Y, U = lowpass(data.Y, data.U, data.starts, data.h, edge)
+            Y, U = lowpass(data.Y, data.U, data.starts, data.h, self._band_edge)
             data = self._smooth_train = _Data(Y=Y, U=U, starts=data.starts, h=data.h)
         na, p = self.output_lags, self.n_outputs_
         n_reg = na * p + self.input_lags * self.n_features_in_
