@@ -293,12 +293,38 @@ such, default=None
         self._S = np.ascontiguousarray(S)
         self._sizes_ = self._sizes()
         self._act = ACTIVATIONS[self.activation]
-        # Least-squares ARX fit (with intercept) in network coordinates.
-        Z = phi @ S.T
+        self._arx = self._stable_arx(phi @ S.T, data.Y[data.modelled])
+
+    def _stable_arx(self, Z: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Least-squares ARX fit (with intercept) in network coordinates, stable.
+
+        On records a lower order fits exactly (noise-free, or a structure
+        of fewer states than lags), least squares is free to add a pole
+        and a zero that cancel, and it may put them outside the unit
+        circle: the one-step fit is exact, the free run diverges from
+        rounding, and every training stage after it is skipped. The
+        output lags are then cut, highest first, down to none (a finite
+        impulse response, always stable), until the model is stable.
+        """
+        na, p = self.output_lags, self.n_outputs_
         design = np.hstack([Z, np.ones((len(Z), 1))])
-        target = data.Y[data.modelled]
-        theta, *_ = np.linalg.lstsq(design, target, rcond=None)
-        self._arx = theta
+        for k in range(na, -1, -1):
+            # Columns of output lags beyond k (plain lags, or differences of
+            # order k and more, which read lags beyond k) are left out.
+            keep = np.r_[np.arange(k * p), np.arange(na * p, design.shape[1])]
+            theta = np.zeros((design.shape[1], p))
+            theta[keep], *_ = np.linalg.lstsq(design[:, keep], target, rcond=None)
+            if self._arx_radius(theta) < 1.0:
+                break
+        return theta
+
+    def _arx_radius(self, theta: np.ndarray) -> float:
+        """Spectral radius of the block companion matrix of an ARX fit."""
+        na, p = self.output_lags, self.n_outputs_
+        lags = (self._S.T @ theta[:-1])[: na * p]  # plain lag coefficients
+        C = np.eye(na * p, k=-p)
+        C[:p] = lags.T
+        return float(np.max(np.abs(np.linalg.eigvals(C))))
 
     def _layer_slices(self):
         sizes, out, p = self._sizes_, [], 0
