@@ -75,11 +75,12 @@ def make_building_records(
         Samples per natural period (sets ``dt``).
     spread : float
         Ratio between the strongest and the weakest record's excitation
-        (1 gives records of equal strength). The strengths are spaced
-        evenly on a log scale around the paper's calibrated ``r0``; test
-        records lie between training ones. The training records are
-        shuffled, so that the held-out validation record is not the
-        strongest.
+        (1 gives records of equal strength); the default 50 spreads the peak
+        responses about a hundredfold (yielding amplifies the strong ones).
+        The strengths are spaced evenly on a log scale around the paper's
+        calibrated ``r0``; test records lie between training ones. The
+        training records are shuffled, so that the held-out validation
+        record is not the strongest.
     padded : bool
         Set the last 5-15 % of every other training record (excitation and
         response) exactly to zero. Test records are never padded: models are
