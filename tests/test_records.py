@@ -135,3 +135,21 @@ def test_noise_warning_tells_how_to_decimate_oversampled_records():
     model = TDLRegressor(hidden_layer_sizes=(), n_init=1, max_iter=2)
     with pytest.warns(UserWarning, match=r"about 6\d samples per period.*1, 3, axis"):
         model.fit(Xs[0], y)
+
+
+def test_tdl_start_keeps_the_pole_of_an_integrating_structure():
+    # A position driven by a force through an integrator (as in EMPS): the
+    # ARX pole sits at one, up to rounding. It is not an instability to cut
+    # lags for; a start without output lags would not integrate at all.
+    rng = np.random.default_rng(0)
+    Xs = [rng.standard_normal((1500, 1)) for _ in range(3)]
+    ys = [lfilter([0.0, 0.01], [1.0, -1.0], X[:, 0]) for X in Xs]
+    model = TDLRegressor(
+        hidden_layer_sizes=(), n_init=1, max_iter=2, early_stopping=False
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model.fit(Xs[:2], ys[:2])
+    assert model._arx_radius(model._arx) == pytest.approx(1.0, abs=1e-6)
+    y_sim = model.predict(Xs[2])
+    assert np.sqrt(np.mean((y_sim - ys[2]) ** 2)) < 1e-3 * ys[2].std()
