@@ -32,7 +32,7 @@ from sklearn.utils.validation import _check_feature_names, check_is_fitted
 from sysid_nn import _uncertainty
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._progress import report_stage
-from sysid_nn._record_checks import check_sampling, decimation_advice, trim_padding
+from sysid_nn._record_checks import check_sampling, trim_padding
 from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 from sysid_nn._state_estimation import fit_initial_condition, noise_variance
 from sysid_nn._validation import check_same_width
@@ -514,8 +514,8 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
             val.skip = skip
         self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train.Y).max())
         modelled = [(a + train.h, b) for a, b in pairwise(train.starts)]
-        spp = check_sampling(type(self).__name__, train.Y, modelled)
-        self._check_noise(train, spp)
+        spp, advice = check_sampling(type(self).__name__, train.Y, modelled)
+        self._check_noise(train, spp, advice)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
         with _single_threaded_blas():
             self._prepare_structure(train)
@@ -560,14 +560,15 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         sizes = self.hidden_layer_sizes
         return tuple(sizes) if np.iterable(sizes) else (sizes,)
 
-    def _check_noise(self, train: _Data, spp: float = np.nan) -> None:
+    def _check_noise(self, train: _Data, spp: float = np.nan, advice: str = "") -> None:
         """Estimate the output noise; warn where it swamps the fine structure.
 
         At fine sampling the dynamics show in the second difference of the
         outputs (the TDL reads the hysteretic state from it, the ISSM's
         one-step stage fits to it), a small fraction of the outputs. White
         noise on the records enters that difference six-fold in variance.
-        ``spp`` (samples per period) adds how to decimate oversampled records.
+        With ``spp`` (samples per period) above ``_DECIMATE_NOISY``, the
+        warning adds ``advice`` on decimating the records.
         """
         var = noise_variance(train.Y, train.U, train.starts, train.h, self.input_delay)
         self.output_noise_std_ = np.sqrt(var) * self._y_scale
@@ -597,7 +598,7 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
                 + (
                     f" These records have about {spp:.0f} samples per period, "
                     "where the second difference is a small part of the "
-                    f"output. {decimation_advice(spp)}"
+                    f"output. {advice}"
                     if spp > _DECIMATE_NOISY
                     else ""
                 ),

@@ -15,7 +15,7 @@ Sampling ratio
 The default lags and shooting segments are counted in samples, so what they
 span of the structure's motion depends on how finely it is sampled. ``fit``
 estimates the samples per fundamental period from the outputs' spectrum
-and warns outside the range where the defaults were measured to work.
+and warns above the range where the defaults were measured to work.
 """
 
 from __future__ import annotations
@@ -25,12 +25,10 @@ import warnings
 import numpy as np
 from scipy.signal import welch
 
-#: Samples per fundamental period the defaults were measured to handle on
-#: clean records of the hysteretic oscillator (benchmarks/bench_records.py:
-#: both networks from 20 to 200; at 400 the TDL still, the displacement-only
-#: ISSM not). ``fit`` warns outside this range; the lower end is where the
-#: fundamental nears the Nyquist frequency (2).
-_MIN_SAMPLES_PER_PERIOD = 5.0
+#: Samples per fundamental period up to which the defaults were measured to
+#: handle clean records of the hysteretic oscillator (benchmarks/
+#: bench_records.py: both networks from 20 to 200; at 400 the TDL still, the
+#: displacement-only ISSM not). ``fit`` warns above it.
 _MAX_SAMPLES_PER_PERIOD = 250.0
 #: A trailing stretch counts as padding from this many samples on: a single
 #: exact zero in every column is a coincidence, a run of them is not.
@@ -127,40 +125,55 @@ def samples_per_period(Y: np.ndarray, segments) -> float:
 _TARGET_SAMPLES_PER_PERIOD = 20.0
 
 
-def decimation_advice(spp: float) -> str:
-    """How to decimate records with ``spp`` samples per period, as a sentence."""
-    k = max(2, round(spp / _TARGET_SAMPLES_PER_PERIOD))
+#: Decimation keeps at least this many samples of the shortest record (the
+#: paper's records have 2000): a slow, non-oscillating motion (EMPS: a
+#: positioning stage, about 7000 samples per "period" of its trajectory)
+#: must not be decimated to a handful of samples.
+_MIN_DECIMATED_LENGTH = 2000
+
+
+def decimation_advice(spp: float, shortest: int) -> str:
+    """How to decimate records of ``spp`` samples per period, as a sentence.
+
+    The factor aims at ``_TARGET_SAMPLES_PER_PERIOD`` samples per period and
+    keeps ``_MIN_DECIMATED_LENGTH`` samples of the ``shortest`` record.
+
+    Examples
+    --------
+    >>> decimation_advice(170.0, 7200).split(": ")[-1]
+    'scipy.signal.resample_poly(a, 1, 3, axis=0) on X and y.'
+    >>> decimation_advice(7000.0, 24000).split(": ")[-1]  # keeps 2000 samples
+    'scipy.signal.resample_poly(a, 1, 12, axis=0) on X and y.'
+    """
+    k = round(spp / _TARGET_SAMPLES_PER_PERIOD)
+    k = max(2, min(k, shortest // _MIN_DECIMATED_LENGTH))
     return (
         "Decimate excitation and response alike, with an anti-aliasing filter, "
-        f"by about {k} (to some {_TARGET_SAMPLES_PER_PERIOD:g} samples per "
-        f"period): scipy.signal.resample_poly(a, 1, {k}, axis=0) on X and on y."
+        f"by about {k} (to some {spp / k:.0f} samples per period): "
+        f"scipy.signal.resample_poly(a, 1, {k}, axis=0) on X and y."
     )
 
 
-def check_sampling(name: str, Y: np.ndarray, segments) -> float:
-    """Samples per period of the outputs; warn far outside what the defaults handle."""
+def check_sampling(name: str, Y: np.ndarray, segments) -> tuple[float, str]:
+    """Samples per period of the outputs, and how to decimate them.
+
+    Warns when they lie above what the defaults were measured to handle.
+    Returns ``(spp, advice)`` (``nan`` and ``""`` when it cannot be told).
+    """
     spp = samples_per_period(Y, segments)
-    if np.isnan(spp) or _MIN_SAMPLES_PER_PERIOD <= spp <= _MAX_SAMPLES_PER_PERIOD:
-        return spp
+    if np.isnan(spp):
+        return spp, ""
+    advice = decimation_advice(spp, min(b - a for a, b in segments))
     if spp > _MAX_SAMPLES_PER_PERIOD:
-        advice = (
-            "The lags and shooting segments, counted in samples, then span a "
+        warnings.warn(
+            f"The training outputs of {name} vary with a dominant period of "
+            f"about {spp:.0f} samples (the peak of their spectrum), above the "
+            f"{_MAX_SAMPLES_PER_PERIOD:g} the defaults were measured to handle: "
+            "the lags and shooting segments, counted in samples, then span a "
             "small part of a period, and the dynamics show only in tiny "
-            f"differences between samples. {decimation_advice(spp)}"
+            f"differences between samples. {advice} See the user guide's "
+            "pitfalls page on measured records.",
+            UserWarning,
+            stacklevel=4,
         )
-    else:
-        advice = (
-            "The fundamental is then close to the Nyquist frequency and the "
-            "records barely resolve it: sample more finely, or low-pass the "
-            "records below the fundamental's second harmonic."
-        )
-    warnings.warn(
-        f"The training outputs of {name} oscillate with about {spp:.0f} samples "
-        "per period (the peak of their spectrum), outside the "
-        f"{_MIN_SAMPLES_PER_PERIOD:g} to {_MAX_SAMPLES_PER_PERIOD:g} the defaults "
-        f"were measured to handle. {advice} See the user guide's pitfalls page "
-        "on measured records.",
-        UserWarning,
-        stacklevel=4,
-    )
-    return spp
+    return spp, advice
