@@ -599,7 +599,7 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
                     f" These records have about {spp:.0f} samples per period, "
                     "where the second difference is a small part of the "
                     f"output. {advice}"
-                    if spp > _DECIMATE_NOISY
+                    if spp > _DECIMATE_NOISY and advice
                     else ""
                 ),
                 UserWarning,

@@ -83,9 +83,12 @@ def samples_per_period(Y: np.ndarray, segments) -> float:
     The peak of the power spectrum of the outputs' first difference (each
     column scaled to unit power, averaged over the sequences ``Y[a:b]`` of
     ``segments``): differencing keeps slow drift and offsets, which measured
-    displacements carry, from posing as the fundamental. A peak in the
-    lowest frequency bin gives a lower bound. ``nan`` if the records are
-    too short or constant.
+    displacements carry, from posing as the fundamental. ``nan`` if the
+    records are too short or constant, or if the peak lies below
+    ``_MIN_PERIODS`` periods per analysis window: that is a slow motion,
+    not a resolved oscillation (the EMPS positioning stage reads as about
+    7000 samples per period, and decimating it by 12 made both networks
+    worse: TDL 0.0157 to 0.0248 m, ISSM 0.0105 to 0.0277 m).
 
     Examples
     --------
@@ -107,6 +110,8 @@ def samples_per_period(Y: np.ndarray, segments) -> float:
     if not np.any(power[1:] > 0):
         return float("nan")
     k = 1 + int(np.argmax(power[1:]))
+    if k < _MIN_PERIODS:
+        return float("nan")  # no oscillation resolved: a slow motion
     peak = f[k]
     if k + 1 < len(f):
         # A parabola through the log power of the peak bin and its
@@ -126,17 +131,19 @@ _TARGET_SAMPLES_PER_PERIOD = 20.0
 
 
 #: Decimation keeps at least this many samples of the shortest record (the
-#: paper's records have 2000): a slow, non-oscillating motion (EMPS: a
-#: positioning stage, about 7000 samples per "period" of its trajectory)
-#: must not be decimated to a handful of samples.
+#: paper's records have 2000).
 _MIN_DECIMATED_LENGTH = 2000
+#: Periods of the dominant oscillation an analysis window must hold for it to
+#: count as one.
+_MIN_PERIODS = 4
 
 
 def decimation_advice(spp: float, shortest: int) -> str:
     """How to decimate records of ``spp`` samples per period, as a sentence.
 
     The factor aims at ``_TARGET_SAMPLES_PER_PERIOD`` samples per period and
-    keeps ``_MIN_DECIMATED_LENGTH`` samples of the ``shortest`` record.
+    keeps ``_MIN_DECIMATED_LENGTH`` samples of the ``shortest`` record; ``""``
+    where that leaves no factor of two or more.
 
     Examples
     --------
@@ -144,9 +151,12 @@ def decimation_advice(spp: float, shortest: int) -> str:
     'scipy.signal.resample_poly(a, 1, 3, axis=0) on X and y.'
     >>> decimation_advice(7000.0, 24000).split(": ")[-1]  # keeps 2000 samples
     'scipy.signal.resample_poly(a, 1, 12, axis=0) on X and y.'
+    >>> decimation_advice(170.0, 3000)
+    ''
     """
-    k = round(spp / _TARGET_SAMPLES_PER_PERIOD)
-    k = max(2, min(k, shortest // _MIN_DECIMATED_LENGTH))
+    k = min(round(spp / _TARGET_SAMPLES_PER_PERIOD), shortest // _MIN_DECIMATED_LENGTH)
+    if k < 2:
+        return ""  # too few samples per period, or too short a record
     return (
         "Decimate excitation and response alike, with an anti-aliasing filter, "
         f"by about {k} (to some {spp / k:.0f} samples per period): "
@@ -165,13 +175,14 @@ def check_sampling(name: str, Y: np.ndarray, segments) -> tuple[float, str]:
         return spp, ""
     advice = decimation_advice(spp, min(b - a for a, b in segments))
     if spp > _MAX_SAMPLES_PER_PERIOD:
+        todo = advice or "Longer records would allow decimating them."
         warnings.warn(
             f"The training outputs of {name} vary with a dominant period of "
             f"about {spp:.0f} samples (the peak of their spectrum), above the "
             f"{_MAX_SAMPLES_PER_PERIOD:g} the defaults were measured to handle: "
             "the lags and shooting segments, counted in samples, then span a "
             "small part of a period, and the dynamics show only in tiny "
-            f"differences between samples. {advice} See the user guide's "
+            f"differences between samples. {todo} See the user guide's "
             "pitfalls page on measured records.",
             UserWarning,
             stacklevel=4,

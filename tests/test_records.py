@@ -154,3 +154,11 @@ def test_tdl_start_keeps_the_pole_of_an_integrating_structure():
     assert model._arx_radius(model._arx) == pytest.approx(1.0, abs=1e-6)
     y_sim = model.predict(Xs[2])
     assert np.sqrt(np.mean((y_sim - ys[2]) ** 2)) < 1e-3 * ys[2].std()
+
+
+def test_a_slow_motion_is_not_read_as_an_oscillation():
+    # A smooth positioning trajectory (one slow swing per record) has no
+    # resolved period: no estimate, so no advice to decimate it.
+    t = np.linspace(0, 1, 8000)
+    y = (np.sin(2 * np.pi * t) + 0.1 * t)[:, None]
+    assert np.isnan(samples_per_period(y, [(0, 8000)]))
