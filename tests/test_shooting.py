@@ -161,3 +161,19 @@ def test_free_shooting_stays_accurate_under_output_noise():
     assert est.shooting_ == "free"
     nrmse = np.sqrt(np.mean((est.simulate(ut) - yt) ** 2)) / yt.std()
     assert nrmse < 0.015
+
+
+def test_auto_keeps_the_one_step_schedule_on_a_coarse_nonlinear_record():
+    # Noise-free, but no linear model explains it: the noise estimate (28 %
+    # of the spread) is misfit, which the one-step schedule handles.
+    u = np.random.default_rng(1).standard_normal((1500, 1))
+    y = np.zeros(len(u))
+    for t in range(2, len(u)):
+        y[t] = 0.6 * y[t - 1] - 0.1 * y[t - 2] + 0.8 * np.tanh(u[t - 1, 0])
+        y[t] += 0.2 * u[t - 2, 0] ** 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.simplefilter("ignore", UserWarning)  # the noise warning
+        est = _net(max_iter=2).fit(u, y)
+    assert est.output_noise_std_[0] > 0.1 * y.std()
+    assert (est.shooting_, est.alpha_) == ("measured", 0.0)
