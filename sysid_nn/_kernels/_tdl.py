@@ -91,19 +91,22 @@ def _sparse_product(ptr, idx, val, x, out, n):
 
 
 @njit(cache=True, inline="always")
-def _step(w, sizes, act, bypass, Sr, Yhat, Y, U, t, seg_start, lags, bound, bufs, Z, A):
+def _step(
+    w, sizes, act, bypass, Sr, Yhat, Y, U, t, seg_start, na, nb, nk, bound,
+    phi, z, acts, out, keep, Z, A,
+):  # fmt: skip
     """One step of the recurrence at row ``t``: False when it diverged.
 
-    ``Sr`` is the lag transform by rows, ``lags`` is ``(na, nb, nk)`` and
-    ``bufs`` the scratch ``(phi, z, acts, out)``; the output goes to
-    ``Yhat[t]`` and, when they have rows, ``z`` and the activations to
-    ``Z[t]`` and ``A[t]``.
+    ``Sr`` is the lag transform by rows; ``phi``, ``z``, ``acts`` and
+    ``out`` are scratch. The output goes to ``Yhat[t]`` and, with ``keep``
+    and when they have rows, ``z`` and the activations to ``Z[t]`` and
+    ``A[t]``.
     """
-    phi, z, acts, out = bufs
-    _regressor(Yhat, Y, U, t, seg_start, lags[0], lags[1], lags[2], phi)
+    _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi)
     _sparse_product(Sr[0], Sr[1], Sr[2], phi, z, z.shape[0])
     mlp_forward(w, sizes, act, bypass, z, acts, out)
-    keep_step(Z, A, t, z, acts)
+    if keep:
+        keep_step(Z, A, t, z, acts)
     if out_of_range(out, bound):
         return False
     for k in range(out.shape[0]):
@@ -142,20 +145,21 @@ def _sensitivity_rows(
 @njit(cache=True, inline="always")
 def _loop(
     w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, jac,
-    Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
+    keep, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
 ):  # fmt: skip
-    # Inlined twice by tdl_run, once with the constant NO_JAC, so that the
-    # plain run compiles without the Jacobian branches in its loop.
+    # Inlined twice by tdl_run, once with the constants NO_JAC and no kept
+    # state, so that the plain run of the solvers compiles without the
+    # branches of the Jacobian and of the adjoint state in its loop.
     n_out = Y.shape[1]
     n_z = sizes[0]
     n_w = w.shape[0]
     width = np.max(sizes)
     Sr = _compress(S, True)
     Sc = _compress(S, False)
-    lags = (na, nb, nk)
-    bufs = (np.empty(S.shape[1]), np.empty(n_z), np.zeros(max(1, A.shape[1])),
-            np.empty(n_out))  # fmt: skip
-    out = bufs[3]
+    phi = np.empty(S.shape[1])
+    z = np.empty(n_z)
+    acts = np.zeros(max(1, A.shape[1]))
+    out = np.empty(n_out)
     v = np.zeros(n_out)
     gz = np.empty(n_z)
     gphi = np.empty(S.shape[1])
@@ -175,8 +179,8 @@ def _loop(
         for t in range(a + h, b):
             if t - seg_start == seg_len:
                 seg_start = t
-            if not _step(w, sizes, act, bypass, Sr, Yhat, Y, U, t, seg_start, lags,
-                         bound, bufs, Z, A):  # fmt: skip
+            if not _step(w, sizes, act, bypass, Sr, Yhat, Y, U, t, seg_start, na, nb,
+                         nk, bound, phi, z, acts, out, keep, Z, A):  # fmt: skip
                 diverged[s] = t - a - h
                 fill_rows(Yhat, t, b, np.full(n_out, np.nan))
                 break
@@ -193,7 +197,7 @@ def _loop(
                 else:
                     lag_rows[i - 1] = (slot - i + (ring if slot < i else 0)) * n_out
             _sensitivity_rows(
-                w, sizes, act, bypass, Sc, bufs[1], bufs[2], J, r0, lag_rows, n_fed,
+                w, sizes, act, bypass, Sc, z, acts, J, r0, lag_rows, n_fed,
                 v, gz, gphi, d1, d2,
             )  # fmt: skip
             if jac == NORMAL:
@@ -221,12 +225,12 @@ def tdl_run(
     pass when they have rows. ``diverged[s]`` is the first modelled index of
     sequence ``s`` whose output left ``[-bound, bound]``, or -1.
     """
-    if jac == NO_JAC:
+    if jac == NO_JAC and Z.shape[0] == 0:
         _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
-              NO_JAC, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
+              NO_JAC, False, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
     else:
         _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
-              jac, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
+              jac, True, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
 
 
 @njit(cache=True)
