@@ -31,7 +31,7 @@ from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
 from sysid_nn import _uncertainty
 from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._progress import report_stage
+from sysid_nn._progress import StepReporter, report_stage
 from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 from sysid_nn._state_estimation import fit_initial_condition, noise_variance
 from sysid_nn._validation import check_same_width
@@ -1096,10 +1096,12 @@ class _Tracker:
         self.patience = None
         self.since_best = 0
         self.stopped = False
+        self.progress = StepReporter(est)
         self(w0)
 
     def __call__(self, w) -> None:
         if self.val is None:
+            self.progress(np.inf)
             return
         Yhat, _, diverged, _ = self.est._run(
             w, self.val, self.seg, False, keep_state=False
@@ -1109,6 +1111,7 @@ class _Tracker:
         if not (diverged >= 0).any():
             e = Yhat[rows] - self.val.Y[rows]
             loss = float(np.mean(e * e))
+        self.progress(min(loss, self.best_loss))
         if loss < self.best_loss:
             self.best_loss, self.best_w, self.since_best = loss, w.copy(), 0
         else:
