@@ -147,9 +147,10 @@ def _loop(
     w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, jac,
     keep, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
 ):  # fmt: skip
-    # Inlined twice by tdl_run, once with the constants NO_JAC and no kept
-    # state, so that the plain run of the solvers compiles without the
-    # branches of the Jacobian and of the adjoint state in its loop.
+    # Inlined three times by tdl_run, with the constants NO_JAC and no kept
+    # state (the solvers' plain runs), with no kept state (their Jacobian
+    # runs) and in general, so that the loops the solvers run compile
+    # without the branches they do not take.
     n_out = Y.shape[1]
     n_z = sizes[0]
     n_w = w.shape[0]
@@ -228,6 +229,9 @@ def tdl_run(
     if jac == NO_JAC and Z.shape[0] == 0:
         _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
               NO_JAC, False, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
+    elif Z.shape[0] == 0:
+        _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
+              jac, False, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
     else:
         _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
               jac, True, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
