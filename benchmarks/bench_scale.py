@@ -97,6 +97,22 @@ def _peak() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
+def _timed(fn, clock: dict, key: str):
+    """``fn`` adding its wall time to ``clock[key]`` (and counting its calls
+    in ``clock["n_" + key]`` where there is one)."""
+
+    def wrapper(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            clock[key] += time.perf_counter() - start
+            if "n_" + key in clock:
+                clock["n_" + key] += 1
+
+    return wrapper
+
+
 def _instrument(est, log: list):
     """Record per stage: iterations, time, and its split into evaluations."""
     from sysid_nn import _base, _solvers
@@ -105,15 +121,7 @@ def _instrument(est, log: list):
     clock.update(track=0.0, n_track=0)
 
     def timed(name, fn):
-        def wrapper(*args, **kwargs):
-            start = time.perf_counter()
-            try:
-                return fn(*args, **kwargs)
-            finally:
-                clock[name] += time.perf_counter() - start
-                clock["n_" + name] += 1
-
-        return wrapper
+        return _timed(fn, clock, name)
 
     _solvers._Objective.residuals = timed("resid", _solvers._Objective.residuals)
     _solvers._Objective.normal_equations = timed(
@@ -263,16 +271,7 @@ def _csv_worker(n: str, path: str, options: str) -> dict:
     stages = dict.fromkeys(labels, 0.0)
 
     def timed(module, name, label):
-        fn = getattr(module, name)
-
-        def wrapper(*args, **kwargs):
-            start = time.perf_counter()
-            try:
-                return fn(*args, **kwargs)
-            finally:
-                stages[label] += time.perf_counter() - start
-
-        setattr(module, name, wrapper)
+        setattr(module, name, _timed(getattr(module, name), stages, label))
 
     timed(cli, "_read_records", "read CSV")
     timed(cli, "_fit", "fit (restarts, selection, covariance)")
