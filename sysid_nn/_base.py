@@ -29,9 +29,9 @@ from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
-from sysid_nn import _uncertainty
+from sysid_nn import _progress, _uncertainty
 from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._progress import StepReporter, report_stage
+from sysid_nn._progress import report_stage
 from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 from sysid_nn._state_estimation import fit_initial_condition, noise_variance
 from sysid_nn._validation import check_same_width
@@ -1096,7 +1096,7 @@ class _Tracker:
         self.patience = None
         self.since_best = 0
         self.stopped = False
-        self.progress = StepReporter(est)
+        self.progress = _progress.StepReporter(est)
         self(w0)
 
     def __call__(self, w) -> None:
