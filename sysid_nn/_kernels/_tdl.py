@@ -142,52 +142,16 @@ def _sensitivity_rows(
                         gw[c] += coef * J[srow + k, c]
 
 
-@njit(cache=True)
-def _simulate(
-    w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, Yhat,
-    diverged,
-):  # fmt: skip
-    """:func:`tdl_run` with outputs only and no kept state.
-
-    The solvers' plain runs (trial steps, validation) take this loop, which
-    compiles without the branches of the Jacobian and of the kept state. A
-    separate function, not a specialisation of :func:`_loop` by inlining:
-    numba takes several times longer to compile that.
-    """
-    Sr = _compress(S, True)
-    phi = np.empty(S.shape[1])
-    z = np.empty(sizes[0])
-    acts = np.zeros(max(1, np.sum(sizes[1:-1])))
-    out = np.empty(Y.shape[1])
-    none = np.empty((0, 1))
-    for s in range(starts.shape[0] - 1):
-        a = starts[s]
-        b = starts[s + 1]
-        diverged[s] = -1
-        copy_rows(Yhat, Y, a, a + h)
-        seg_start = a + h
-        for t in range(a + h, b):
-            if t - seg_start == seg_len:
-                seg_start = t
-            if not _step(w, sizes, act, bypass, Sr, Yhat, Y, U, t, seg_start, na, nb,
-                         nk, bound, phi, z, acts, out, False, none, none):  # fmt: skip
-                _diverge(Yhat, diverged, s, t, a, b, h)
-                break
-
-
 @njit(cache=True, inline="always")
-def _diverge(Yhat, diverged, s, t, a, b, h):
-    """Sequence ``s`` (rows ``a:b``) diverged at row ``t``: NaN from there on."""
-    diverged[s] = t - a - h
-    fill_rows(Yhat, t, b, np.full(Yhat.shape[1], np.nan))
-
-
-@njit(cache=True)
 def _loop(
     w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, jac,
     keep, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
 ):  # fmt: skip
-    """:func:`tdl_run` in general (``keep``: store ``Z`` and ``A``)."""
+    # Inlined twice by tdl_run, once with the constants NO_JAC and no kept
+    # state, so that the solvers' plain runs compile without the branches of
+    # the Jacobian and of the kept state. Each inlined copy costs numba about
+    # 10 s of compilation into an empty cache: a third one, for the Jacobian
+    # runs without kept state, made them 5 % faster but was not worth it.
     n_out = Y.shape[1]
     n_z = sizes[0]
     n_w = w.shape[0]
@@ -219,7 +183,8 @@ def _loop(
                 seg_start = t
             if not _step(w, sizes, act, bypass, Sr, Yhat, Y, U, t, seg_start, na, nb,
                          nk, bound, phi, z, acts, out, keep, Z, A):  # fmt: skip
-                _diverge(Yhat, diverged, s, t, a, b, h)
+                diverged[s] = t - a - h
+                fill_rows(Yhat, t, b, np.full(n_out, np.nan))
                 break
             if jac == NO_JAC:
                 continue
@@ -263,8 +228,8 @@ def tdl_run(
     sequence ``s`` whose output left ``[-bound, bound]``, or -1.
     """
     if jac == NO_JAC and Z.shape[0] == 0:
-        _simulate(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len,
-                  bound, Yhat, diverged)  # fmt: skip
+        _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
+              NO_JAC, False, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
     else:
         _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
               jac, Z.shape[0] > 0, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
