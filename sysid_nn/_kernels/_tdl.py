@@ -147,11 +147,10 @@ def _loop(
     w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, jac,
     keep, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
 ):  # fmt: skip
-    # Inlined twice by tdl_run, once with the constants NO_JAC and no kept
-    # state, so that the solvers' plain runs compile without the branches of
-    # the Jacobian and of the kept state. Each inlined copy costs numba about
-    # 10 s of compilation into an empty cache: a third one, for the Jacobian
-    # runs without kept state, made them 5 % faster but was not worth it.
+    # Inlined three times by tdl_run, with the constants NO_JAC and no kept
+    # state (the solvers' plain runs), with no kept state (their Jacobian
+    # runs) and in general, so that the loops the solvers run compile
+    # without the branches they do not take.
     n_out = Y.shape[1]
     n_z = sizes[0]
     n_w = w.shape[0]
@@ -230,9 +229,12 @@ def tdl_run(
     if jac == NO_JAC and Z.shape[0] == 0:
         _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
               NO_JAC, False, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
+    elif Z.shape[0] == 0:
+        _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
+              jac, False, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
     else:
         _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
-              jac, Z.shape[0] > 0, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
+              jac, True, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
 
 
 @njit(cache=True)
