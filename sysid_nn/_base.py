@@ -29,7 +29,7 @@ from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
-from sysid_nn import _uncertainty
+from sysid_nn import _progress, _uncertainty
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._progress import report_stage
 from sysid_nn._record_checks import check_sampling, trim_padding
@@ -1115,10 +1115,12 @@ class _Tracker:
         self.patience = None
         self.since_best = 0
         self.stopped = False
+        self.progress = _progress.StepReporter(est)
         self(w0)
 
     def __call__(self, w) -> None:
         if self.val is None:
+            self.progress(np.inf)
             return
         Yhat, _, diverged, _ = self.est._run(
             w, self.val, self.seg, False, keep_state=False
@@ -1128,6 +1130,7 @@ class _Tracker:
         if not (diverged >= 0).any():
             e = Yhat[rows] - self.val.Y[rows]
             loss = float(np.mean(e * e))
+        self.progress(min(loss, self.best_loss))
         if loss < self.best_loss:
             self.best_loss, self.best_w, self.since_best = loss, w.copy(), 0
         else:
