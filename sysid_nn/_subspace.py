@@ -7,12 +7,14 @@ measurement noise is uncorrelated with the past, so unlike a least-squares
 ARX fit (whose regressors carry the noise) the estimate stays consistent
 under white output noise (Van Overschee & De Moor 1996, ch. 4; Ljung 1999,
 sec. 10.6). The past window gives the Kalman-filter states along the data,
-from which ``A, B, C, K`` follow by least squares.
+from which ``A, B, C, K`` follow by least squares (``K`` from the steady-state
+Riccati equation where the least-squares gain gives an unstable predictor).
 """
 
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import solve_discrete_are
 from sklearn.utils import Bunch
 
 #: Past and future horizon (samples) of the block-Hankel matrices.
@@ -89,15 +91,29 @@ def subspace_model(Y, U, n: int, horizon: int = HORIZON) -> Bunch:
     u_now, y_now = np.vstack(u_now), np.vstack(y_now)
     C = np.linalg.lstsq(x_now, y_now, rcond=None)[0].T
     e = y_now - x_now @ C.T
+    m = u_now.shape[1]
     design = np.hstack([x_now, u_now, e, np.ones((len(e), 1))])
     theta = np.linalg.lstsq(design, x_next, rcond=None)[0].T
-    m = u_now.shape[1]
-    return Bunch(
-        A=theta[:, :n],
-        B=theta[:, n : n + m],
-        K=theta[:, n + m : n + m + p],
-        c=theta[:, -1],
-        C=C,
-        states=x_now,
-        observer=observer,
-    )
+    A, B, K, c = np.split(theta, [n, n + m, n + m + p], axis=1)
+    if np.abs(np.linalg.eigvals(A - K @ C)).max() >= 1.0:
+        # Nearly noise-free records leave the regression's gain unstable
+        # (the one-step predictor would diverge): take the Riccati gain.
+        w = x_next - design[:, : n + m] @ np.hstack([A, B]).T
+        K = kalman_gain(A, C, w, e)
+    return Bunch(A=A, B=B, K=K, c=c[:, 0], C=C, states=x_now, observer=observer)
+
+
+def kalman_gain(A, C, w, v):
+    """Steady-state Kalman (predictor) gain from state and output residuals.
+
+    ``w`` and ``v`` are the residuals of the state and output equations
+    along the data; their covariances are the process and measurement
+    noise's (about their means: ``w`` holds the constant too). The gain of
+    the discrete Riccati equation gives a stable predictor ``A - K C``
+    whenever one exists.
+    """
+    n = A.shape[0]
+    cov = np.cov(np.hstack([w, v]).T).reshape(n + C.shape[0], -1)
+    Q, S, R = cov[:n, :n], cov[:n, n:], cov[n:, n:]
+    P = solve_discrete_are(A.T, C.T, Q, R, s=S)
+    return (A @ P @ C.T + S) @ np.linalg.inv(C @ P @ C.T + R)
