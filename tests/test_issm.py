@@ -637,19 +637,28 @@ def test_subspace_start_has_a_stable_one_step_predictor():
 
 
 def test_default_start_follows_the_noise_on_the_records():
-    for level, start in [(0.0, "arx"), (0.05, "subspace")]:
-        u, y = _noisy_second_order(level)
+    def fit(y):
         with warnings.catch_warnings():
             warnings.simplefilter("error", UserWarning)  # no noise warning
             warnings.simplefilter("ignore", ConvergenceWarning)
-            model = ISSMRegressor(n_init=1, max_iter=1, random_state=0).fit(u, y)
-        assert model.init_ == start
-    # With several outputs the ARX start kept its accuracy under noise.
-    two = np.column_stack([y, np.roll(y, 1)])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        model = ISSMRegressor(n_init=1, max_iter=1, random_state=0).fit(u, two)
+            return ISSMRegressor(n_init=1, max_iter=1, random_state=0).fit(u, y)
+
+    u, y = _noisy_second_order(0.0)
+    model = fit(y)
     assert model.init_ == "arx"
+    assert len(model.restart_scores_) == 1
+    # Noisy: the subspace start, and one restart more from the ARX start;
+    # init_ and linear_model_ are the chosen restart's.
+    u, y = _noisy_second_order(0.05)
+    model = fit(y)
+    assert len(model.restart_scores_) == 2
+    assert model.init_ == ["subspace", "arx"][np.argmax(model.restart_scores_)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = ISSMRegressor(init=model.init_, n_init=1, max_iter=1).fit(u, y)
+    np.testing.assert_array_equal(model.linear_model_.A, ref.linear_model_.A)
+    # With several outputs the ARX start kept its accuracy under noise.
+    assert fit(np.column_stack([y, np.roll(y, 1)])).init_ == "arx"
     with pytest.warns(UserWarning, match="white noise"):
         ISSMRegressor(init="arx", n_init=1, max_iter=1, random_state=0).fit(u, y)
 
