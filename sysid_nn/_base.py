@@ -572,6 +572,8 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         """
         var = noise_variance(train.Y, train.U, train.starts, train.h, self.input_delay)
         self.output_noise_std_ = np.sqrt(var) * self._y_scale
+        # Read by starts that are biased under such noise (the ISSM's).
+        self._noisy_outputs = False
         d2 = np.concatenate(
             [
                 np.diff(train.Y[a + train.h : b], 2, axis=0)
@@ -582,7 +584,8 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
             return
         # The noise's share of the second difference's spread (at most 1).
         ratio = np.sqrt(np.minimum(6.0 * var / np.maximum(d2.var(axis=0), 1e-300), 1))
-        if self._noise_sensitive() and np.any(ratio > _NOISY_DIFFERENCE):
+        self._noisy_outputs = bool(np.any(ratio > _NOISY_DIFFERENCE))
+        if self._noise_sensitive() and self._noisy_outputs:
             k = int(np.argmax(ratio))
             warnings.warn(
                 f"The training outputs of {type(self).__name__} carry white noise of "
