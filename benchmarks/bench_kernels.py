@@ -43,6 +43,10 @@ from sysid_nn import HystereticOscillator, TDLRegressor  # noqa: E402
 from sysid_nn._base import _FREE_RUN  # noqa: E402
 from sysid_nn.study import PAPER_TDL  # noqa: E402
 
+#: Repeats of the comparison with the reference kernel: its spread shows how
+#: much of a ratio is noise on a shared machine.
+REFERENCE_REPEATS = 3
+
 FIRST_CALL = """
 import time, numpy as np
 t0 = time.perf_counter()
@@ -75,19 +79,26 @@ def _first_call(cache_dir: str) -> float:
 
 
 def _interleaved(fns: dict, rounds: int = 60) -> dict:
-    """Best thread CPU time of each function, the functions taking turns."""
+    """Best thread CPU time of each function, the functions taking turns.
+
+    Each turn runs its function twice and times the second call: the first
+    refills the caches that the previous function (a Jacobian of megabytes)
+    evicted, which would otherwise count against whichever function comes
+    next in the round, whatever its own speed.
+    """
     best = dict.fromkeys(fns, np.inf)
     for fn in fns.values():
         fn()
     for _ in range(rounds):
         for name, fn in fns.items():
+            fn()
             start = time.thread_time()
             fn()
             best[name] = min(best[name], time.thread_time() - start)
     return best
 
 
-def _reference_row(rec, n: int) -> str:
+def _reference_row(rec, n: int, repeat: int) -> str:
     """Project kernels against the minimal RTRL kernel, one table row."""
     model, data, w = _paper_model(rec, n)
     na, nb, nk = model._lags()
@@ -113,7 +124,8 @@ def _reference_row(rec, n: int) -> str:
     )
     us = {k: v * 1e6 / n for k, v in best.items()}
     return (
-        f"| {n} | {us['ref_fwd']:.3f} | {us['fwd']:.3f} | "
+        f"| {n} | {repeat} | {os.getloadavg()[0]:.1f} | {us['ref_fwd']:.3f} | "
+        f"{us['fwd']:.3f} | "
         f"{us['fwd'] / us['ref_fwd']:.2f} | {us['ref_jac']:.3f} | {us['jac']:.3f} | "
         f"{us['jac'] / us['ref_jac']:.2f} | {us['normal']:.3f} | "
         f"{us['full_normal']:.3f} |"
@@ -175,23 +187,29 @@ def main() -> str:
         "",
         "Same network and weights, free run, one sequence; the kernels agree to "
         "rounding before they are timed. Best of 60 interleaved repeats of the "
-        "thread's CPU time, in microseconds per step; `forward` and `forward + "
+        "thread's CPU time (each the second of two calls in a row, so that no "
+        "function pays for refilling the caches after another), in "
+        "microseconds per step; `forward` and `forward + "
         "Jacobian` are the project's `_run` without the adjoint state. `normal "
         "equations` is the accumulated `J'J`, `J'r` Levenberg-Marquardt uses "
         "(BLAS `dsyrk` by blocks of 256 rows, memory independent of N); `full J, "
         "then J'J` is how they were formed before (N x P Jacobian, then a "
-        "matrix product).",
+        "matrix product). The whole comparison is repeated "
+        f"{REFERENCE_REPEATS} times in this run; load is the machine's load "
+        "average (2 cores) when each row was measured.",
         "",
-        "| N | reference forward | forward | ratio | reference forward + Jacobian "
-        "| forward + Jacobian | ratio | normal equations | full J, then J'J |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| N | repeat | load | reference forward | forward | ratio | reference "
+        "forward + Jacobian | forward + Jacobian | ratio | normal equations | "
+        "full J, then J'J |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     # A stationary record long enough for both lengths (the modulation of the
     # paper's excitation ends at t2).
     long = HystereticOscillator(t2=200.0).generate(1, 20000, random_state=0)
     with threadpoolctl.threadpool_limits(limits=1, user_api="blas"):
-        for n in (2000, 20000):
-            lines.append(_reference_row(long, n))
+        for repeat in range(1, REFERENCE_REPEATS + 1):
+            for n in (2000, 20000):
+                lines.append(_reference_row(long, n, repeat))
 
     X = rec.excitation[0, ::3, None]
     y = rec.displacement[0, ::3]

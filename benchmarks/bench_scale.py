@@ -97,6 +97,22 @@ def _peak() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
+def _timed(fn, clock: dict, key: str):
+    """``fn`` adding its wall time to ``clock[key]`` (and counting its calls
+    in ``clock["n_" + key]`` where there is one)."""
+
+    def wrapper(*args, **kwargs):
+        start = time.perf_counter()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            clock[key] += time.perf_counter() - start
+            if "n_" + key in clock:
+                clock["n_" + key] += 1
+
+    return wrapper
+
+
 def _instrument(est, log: list):
     """Record per stage: iterations, time, and its split into evaluations."""
     from sysid_nn import _base, _solvers
@@ -105,15 +121,7 @@ def _instrument(est, log: list):
     clock.update(track=0.0, n_track=0)
 
     def timed(name, fn):
-        def wrapper(*args, **kwargs):
-            start = time.perf_counter()
-            try:
-                return fn(*args, **kwargs)
-            finally:
-                clock[name] += time.perf_counter() - start
-                clock["n_" + name] += 1
-
-        return wrapper
+        return _timed(fn, clock, name)
 
     _solvers._Objective.residuals = timed("resid", _solvers._Objective.residuals)
     _solvers._Objective.normal_equations = timed(
@@ -239,6 +247,95 @@ def _costs(sizes) -> dict:
     return out
 
 
+#: Options of the capped ``sysid-nn fit`` run of ``--csv``: one restart and a
+#: few iterations per stage, so that the run takes minutes, not hours.
+CSV_OPTIONS = "--n-init 1 --max-iter 10"
+
+
+def _write_csv(n: int, path: Path) -> None:
+    """The one-record case of ``n`` samples as a CSV file, as users keep it."""
+    import pandas as pd
+
+    X, y = _records(str(n))
+    frame = {"t": np.arange(n) * 0.01, "excitation": X[:, 0], "displacement": y}
+    pd.DataFrame(frame).to_csv(path, index=False)
+
+
+def _csv_worker(n: str, path: str, options: str) -> dict:
+    """``sysid-nn fit`` on ``path`` in this process: time per stage, peak memory."""
+    from sysid_nn import _uncertainty, cli
+
+    labels = ("read CSV", "fit (restarts, selection, covariance)",
+              "of which: covariance of the bands", "score held-out part",
+              "save model")  # fmt: skip
+    stages = dict.fromkeys(labels, 0.0)
+
+    def timed(module, name, label):
+        setattr(module, name, _timed(getattr(module, name), stages, label))
+
+    timed(cli, "_read_records", "read CSV")
+    timed(cli, "_fit", "fit (restarts, selection, covariance)")
+    timed(_uncertainty, "fit_covariance", "of which: covariance of the bands")
+    timed(cli, "_scores", "score held-out part")
+    timed(cli, "_write_atomic", "save model")
+    save = str(Path(path).with_suffix(".joblib"))
+    argv = ["fit", path, "--input", "excitation", "--output", "displacement"]
+    argv += [*options.split(), "--save", save, "--overwrite", "--verbose"]
+    reset = _reset_peak()
+    rss_before = _rss()
+    start, cpu = time.perf_counter(), time.process_time()
+    code = cli.main(argv)
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
+    # Imports done on the way (pandas, scikit-learn, the compiled kernels).
+    stages["the rest (imports, checks)"] = seconds - sum(
+        v for k, v in stages.items() if not k.startswith("of which")
+    )
+    return {
+        "kind": "csv",
+        "case": n,
+        "params": {"options": options},
+        "exit_code": code,
+        "seconds": seconds,
+        "cpu_seconds": cpu,
+        "stages": stages,
+        "peak_since_fit_start": reset,
+        "peak_rss": _peak(),
+        "peak_rss_above_start": max(0, _peak() - rss_before),
+        "rss_before": rss_before,
+        "when": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "load_average": os.getloadavg()[0],
+    }
+
+
+def _run_csv(n: int, options: str) -> dict:
+    """Write an ``n``-sample CSV, fit it by the command line in a subprocess.
+
+    The subprocess's progress lines (stderr) are kept with the time they
+    appeared, to show that a long fit reports as it goes.
+    """
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / f"record_{n}.csv"
+        _write_csv(n, path)
+        size = path.stat().st_size
+        cmd = [sys.executable, __file__, "--csv-worker", str(n), str(path), options]
+        env = dict(os.environ, PYTHONPATH=str(HERE.parent))
+        start = time.perf_counter()
+        proc = subprocess.Popen(
+            cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env
+        )
+        progress = []
+        for line in proc.stderr:
+            progress.append([round(time.perf_counter() - start, 1), line.rstrip()])
+        out = proc.stdout.read()
+        if proc.wait() != 0:
+            raise RuntimeError("\n".join(p[1] for p in progress))
+    result = json.loads(out.strip().splitlines()[-1])["result"]
+    result.update(csv_bytes=size, progress=progress, summary=out.splitlines()[:-1])
+    return result
+
+
 def _run_case(kind: str, case: str) -> dict:
     out = subprocess.run(
         [sys.executable, __file__, "--worker", kind, case, "{}"],
@@ -357,6 +454,7 @@ def _cost_lines(r: dict) -> list[str]:
 def _write_table() -> str:
     every = _latest()
     costs = every.pop(("costs", "costs", "{}"), None)
+    csv_runs = [every.pop(k) for k in sorted(every) if k[0] == "csv"]
     latest = {(k, c): r for (k, c, p), r in every.items() if p == "{}"}
     capped = [r for (k, c, p), r in sorted(every.items()) if p != "{}"]
     lines = [
@@ -492,9 +590,56 @@ def _write_table() -> str:
         lines += _stage_summary(latest[key])
     for r in capped:
         lines += _stage_summary(r)
+    lines += _csv_lines(csv_runs)
     text = "\n".join(lines) + "\n"
     (HERE / "results_scale.md").write_text(text)
     return text
+
+
+def _csv_lines(runs: list) -> list[str]:
+    """The section on ``sysid-nn fit`` of a long CSV file (``--csv``)."""
+    if not runs:
+        return []
+    lines = [
+        "",
+        "## `sysid-nn fit` on a long CSV file",
+        "",
+        "One record of N samples (the one-record case above) written as a CSV "
+        "file with columns t, excitation, displacement, fitted by the command "
+        "line in a fresh process with a capped budget: `python "
+        "benchmarks/bench_scale.py --csv N [--csv-options ...]`. Wall time "
+        "per stage of the command; peak memory is the whole process's peak "
+        "resident set (imports, compiled kernels, data and fit) and its rise "
+        "during the command.",
+        "",
+        "| N | CSV (MB) | options | stage | time (s) |",
+        "|---|---|---|---|---|",
+    ]
+    for r in runs:
+        head = f"| {int(r['case']):,} | {r['csv_bytes'] / 2**20:.0f} | "
+        head += f"`{r['params']['options']}` | "
+        for stage, seconds in r["stages"].items():
+            lines.append(f"{head}{stage} | {seconds:.1f} |")
+        lines.append(f"{head}whole command (CPU {r['cpu_seconds']:.1f} s) | "
+                     f"{r['seconds']:.1f} |")  # fmt: skip
+    lines += [
+        "",
+        "| N | peak resident set (MB) | rise during the command (MB) | "
+        "progress lines | load |",
+        "|---|---|---|---|---|",
+    ]
+    for r in runs:
+        lines.append(
+            f"| {int(r['case']):,} | {_mb(r['peak_rss'])} | "
+            f"{_mb(r['peak_rss_above_start'])} | {len(r['progress'])} | "
+            f"{r['load_average']:.1f} |"
+        )
+    last = runs[-1]
+    lines += ["", f"Progress of the last run (N = {int(last['case']):,}), "
+              "seconds since the start of the process:", "", "```"]  # fmt: skip
+    lines += [f"{t:7.1f}  {text[:150]}" for t, text in last["progress"]]
+    lines += ["```"]
+    return lines
 
 
 def main(argv: list[str] | None = None) -> str:
@@ -505,8 +650,20 @@ def main(argv: list[str] | None = None) -> str:
     parser.add_argument(
         "--costs", action="store_true", help="CPU time of one evaluation against N"
     )
+    parser.add_argument(
+        "--csv",
+        type=int,
+        metavar="N",
+        help="`sysid-nn fit` on an N-sample CSV file (capped: --csv-options)",
+    )
+    parser.add_argument("--csv-options", default=CSV_OPTIONS, metavar="OPTIONS")
     parser.add_argument("--worker", nargs=3, help=argparse.SUPPRESS)
+    parser.add_argument("--csv-worker", nargs=3, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.csv_worker:
+        result = _csv_worker(*args.csv_worker)
+        print(json.dumps({"result": result}))
+        return ""
     if args.worker:
         kind, case, params = args.worker
         result = _worker(kind, case, json.loads(params))
@@ -514,7 +671,11 @@ def main(argv: list[str] | None = None) -> str:
             f.write(json.dumps(result) + "\n")
         print(json.dumps({"result": result}))
         return ""
-    if args.costs:
+    if args.csv:
+        result = _run_csv(args.csv, args.csv_options)
+        with RESULTS.open("a") as f:
+            f.write(json.dumps(result) + "\n")
+    elif args.costs:
         result = _costs([*SIZES, LARGE])
         with RESULTS.open("a") as f:
             f.write(json.dumps(result) + "\n")

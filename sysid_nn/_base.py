@@ -29,7 +29,7 @@ from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
-from sysid_nn import _uncertainty
+from sysid_nn import _progress, _uncertainty
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._progress import report_stage
 from sysid_nn._record_checks import check_sampling, trim_padding
@@ -588,6 +588,8 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         """
         var = noise_variance(train.Y, train.U, train.starts, train.h, self.input_delay)
         self.output_noise_std_ = np.sqrt(var) * self._y_scale
+        # Read by starts that are biased under such noise (the ISSM's).
+        self._noisy_outputs = False
         d2 = np.concatenate(
             [
                 np.diff(train.Y[a + train.h : b], 2, axis=0)
@@ -601,6 +603,7 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
             else np.zeros_like(var)
         )
         noisy = bool(np.any(ratio > _NOISY_DIFFERENCE))
+        self._noisy_outputs = noisy
         edge = noise_band(train.Y, train.starts, train.h, var) if noisy else 0.5
         self._band_edge = edge
         # Free-state shooting needs a band where the outputs clear the noise,
@@ -1172,10 +1175,12 @@ class _Tracker:
         self.patience = None
         self.since_best = 0
         self.stopped = False
+        self.progress = _progress.StepReporter(est)
         self(w0)
 
     def __call__(self, w) -> None:
         if self.val is None:
+            self.progress(np.inf)
             return
         Yhat, _, diverged, _ = self.est._run(
             w, self.val, self.seg, False, keep_state=False
@@ -1185,6 +1190,7 @@ class _Tracker:
         if not (diverged >= 0).any():
             e = Yhat[rows] - self.val.Y[rows]
             loss = float(np.mean(e * e))
+        self.progress(min(loss, self.best_loss))
         if loss < self.best_loss:
             self.best_loss, self.best_w, self.since_best = loss, w.copy(), 0
         else:

@@ -40,7 +40,8 @@ n_iter_no_change : int, default=10
 random_state : int, RandomState instance or None, default=None
     Seeds the restarts' initial weights.
 verbose : bool, default=False
-    Print progress per stage.
+    Print progress per stage, and within a stage that runs long a line at
+    most every 30 s with the accepted steps so far.
 n_jobs : int, default=None
     Parallel jobs for the restarts (joblib semantics)."""
 

@@ -1,11 +1,14 @@
-"""Linear starting point of the ISSM: an ARX model realised in state space.
+"""Linear starting point of the ISSM, from an ARX or a subspace fit.
 
 An ``init="arx"`` model starts with its linear part exactly at a linear
 innovation model fitted to the training data: a least-squares ARX model, its
 observer-form states along the data, mapped to the model's state coordinates
 (measured outputs first, the others by variance), and a least-squares linear
-innovation model on those states. The functions take the estimator being
-fitted (its sizes, delay and standardised data).
+innovation model on those states. The least-squares fits take noisy measured
+outputs as exact regressors and are biased under output noise; an
+``init="subspace"`` model starts at a subspace fit instead (consistent under
+white output noise), in the same state coordinates. The functions take the
+estimator being fitted (its sizes, delay and standardised data).
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import numpy as np
 from sklearn.utils import Bunch
 
 from sysid_nn._base import _Data
+from sysid_nn._subspace import HORIZON, subspace_model
 
 #: Output and input lags of the ARX model the linear part starts from, and
 #: of the TDL network an ``init="tdl"`` model starts from.
@@ -144,3 +148,60 @@ def state_coordinates(xi: np.ndarray, p: int, n: int) -> np.ndarray:
 def linear_blocks(L: np.ndarray, c: np.ndarray, n: int, m: int) -> Bunch:
     """``A, B, K, c`` of a linear part ``L = [A B K]`` on ``[x, F, E]``."""
     return Bunch(A=L[:, :n], B=L[:, n : n + m], K=L[:, n + m :], c=c)
+
+
+def _subspace_records(est, data: _Data):
+    """The training records as the subspace fit takes them.
+
+    ``u(k)`` of the subspace model acts on ``x(k+1)``: it is ``F(t + 1 -
+    n_k)`` for the output ``y(t)``.
+    """
+    nk = est.input_delay
+    Y, U = [], []
+    for a, b in pairwise(data.starts):
+        first, last = a + data.h + max(0, nk - 1), b - max(0, 1 - nk)
+        Y.append(data.Y[first:last])
+        U.append(data.U[first + 1 - nk : last + 1 - nk])
+    return Y, U
+
+
+def subspace_horizon(est, data: _Data) -> int:
+    """Past and future horizon of the subspace start; 0 if the records are too short.
+
+    The longest up to ``HORIZON`` for which the projection has at least
+    twice as many windows as coefficients and the extended observability
+    matrix more rows than ``n_states``.
+    """
+    p, m, n = est.n_outputs_, est.n_features_in_, est.n_states_
+    lengths = np.array([len(y) for y in _subspace_records(est, data)[0]])
+    for horizon in range(HORIZON, 0, -1):
+        windows = np.maximum(lengths - 2 * horizon + 1, 0).sum()
+        if horizon * p > n and windows >= 2 * horizon * (2 * m + p):
+            return horizon
+    return 0
+
+
+def subspace_start(est, data: _Data) -> Bunch:
+    """The linear innovation model ``A, B, K, c`` from subspace identification.
+
+    Consistent under white output noise, unlike the ARX fit of
+    :func:`linear_start` (see :mod:`sysid_nn._subspace`). The Kalman gain
+    ``K`` is the subspace fit's. The states are put in the coordinates of
+    :func:`state_coordinates` (along the subspace fit's state estimates),
+    with the unmeasured states zero at the model's rest state.
+    """
+    p, n = est.n_outputs_, est.n_states_
+    Y, U = _subspace_records(est, data)
+    lin = subspace_model(Y, U, n, subspace_horizon(est, data))
+    # Measured outputs first: x -> [C x; the rest of the state space].
+    rest = np.linalg.svd(lin.C)[2][p:]
+    M = np.vstack([lin.C, rest])
+    T = state_coordinates(lin.states @ M.T, p, n) @ M
+    Ti = np.linalg.inv(T)
+    A, B, K, c = T @ lin.A @ Ti, T @ lin.B, T @ lin.K, T @ lin.c
+    # Unmeasured states zero at rest (zero excitation in the user's units):
+    # shifting them by d adds (A - I) d to the constant.
+    u_rest = -est._x_mean / est._x_scale
+    x_rest = np.linalg.lstsq(np.eye(n) - A, B @ u_rest + c, rcond=None)[0]
+    shift = np.r_[np.zeros(p), x_rest[p:]]
+    return Bunch(A=A, B=B, K=K, c=c + (A - np.eye(n)) @ shift)

@@ -21,6 +21,10 @@ from typing import Any
 # One open bar per restart of the process that trains it.
 _BARS: dict[int, Any] = {}
 
+#: Within a training stage, at most one progress line per this many seconds:
+#: on a long record one stage can take minutes.
+STEP_SECONDS = 30.0
+
 
 def _interactive() -> bool:
     isatty = getattr(sys.stderr, "isatty", None)
@@ -132,3 +136,46 @@ def report_stage(
     if stage + 1 >= n_stages:
         bar.close()
         del _BARS[restart]
+
+
+class StepReporter:
+    """Lines while a restart trains: its accepted steps so far, now and then.
+
+    Stages end with :func:`report_stage`; on a long record one stage can run
+    for minutes, so the training loop calls this after every accepted step
+    and, if the estimator is ``verbose``, a line is written at most every
+    :data:`STEP_SECONDS`. The first call sees the starting weights and is
+    not counted as a step. Wall-clock time, so that a restart moved to another
+    process or machine keeps counting from its start.
+
+    Parameters
+    ----------
+    estimator : estimator
+        The estimator being trained; its ``verbose`` decides whether to write.
+    """
+
+    def __init__(self, estimator: Any) -> None:
+        self.name = type(estimator).__name__
+        self.verbose = int(estimator.verbose)
+        self.start = self.last = time.time()
+        self.steps = -1  # the first call sees the starting weights
+
+    def __call__(self, validation: float) -> None:
+        """Count one accepted step; ``validation`` is the best validation loss."""
+        self.steps += 1
+        now = time.time()
+        if self.verbose <= 0 or self.steps <= 0 or now - self.last < STEP_SECONDS:
+            return
+        self.last = now
+        line = (
+            f"[{self.name}] training: {self.steps} steps of this restart in "
+            f"{now - self.start:.0f} s"
+        )
+        if validation < float("inf"):
+            line += f", best validation {validation:.3e}"
+        if _interactive():
+            from tqdm.auto import tqdm
+
+            tqdm.write(line, file=sys.stderr)
+        else:
+            print(line, file=sys.stderr, flush=True)

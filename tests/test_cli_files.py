@@ -405,6 +405,28 @@ def test_progress_bar_on_a_terminal(monkeypatch):
     assert screen.getvalue() == text  # nothing, and the loss is not computed
 
 
+def test_progress_lines_within_a_long_stage(monkeypatch, capsys):
+    from sysid_nn import TDLRegressor
+
+    rec = HystereticOscillator().generate(1, 600, random_state=0)
+    X, y = rec.excitation[0][:, None], rec.displacement[0]
+    est = TDLRegressor(n_init=1, max_iter=6, shooting_segments=(), random_state=0)
+    monkeypatch.setattr("sysid_nn._progress.STEP_SECONDS", 0.0)
+    est.set_params(verbose=1).fit(X, y)
+    lines = [x for x in capsys.readouterr().err.splitlines() if "training:" in x]
+    steps = [int(x.split("training: ")[1].split()[0]) for x in lines]
+    # One line per accepted step when every step is late enough, counted on.
+    assert steps == list(range(1, len(steps) + 1)) and len(steps) >= 2
+    assert all("best validation" in x for x in lines)
+    monkeypatch.setattr("sysid_nn._progress.STEP_SECONDS", 3600.0)
+    est.fit(X, y)
+    assert "training:" not in capsys.readouterr().err
+    est.set_params(verbose=0)
+    monkeypatch.setattr("sysid_nn._progress.STEP_SECONDS", 0.0)
+    est.fit(X, y)
+    assert capsys.readouterr().err == ""
+
+
 def test_study_progress_is_plain_lines_off_a_terminal(monkeypatch):
     from sysid_nn.study._progress import _progress
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import threadpoolctl
 from scipy.linalg import solve_discrete_are
+from scipy.signal import lfilter
 from sklearn.exceptions import ConvergenceWarning, NotFittedError
 from sklearn.model_selection import GridSearchCV, KFold
 from sklearn.utils.estimator_checks import parametrize_with_checks
@@ -575,3 +576,98 @@ def test_initial_state_estimated_from_a_measured_window():
     assert np.abs(est - true).max() < 0.25 * np.abs(rest - true).max()
     with pytest.raises(ValueError, match="either initial_state or y_init"):
         model.simulate(X[0], initial_state=start, y_init=true[:40])
+
+
+# --------------------------------------------------------------------------
+# the linear start under output noise
+# --------------------------------------------------------------------------
+def _noisy_second_order(level, n=3000, seed=1):
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal((n, 1))
+    y = lfilter([0.0, 0.5], [1.0, -1.6, 0.9], u[:, 0])
+    return u, y + level * y.std() * rng.standard_normal(n)
+
+
+def _start_poles(init, u, y):
+    model = ISSMRegressor(n_states=2, hidden_layer_sizes=(), init=init, n_init=1,
+                          max_iter=1, early_stopping=False)  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(u, y)
+    return model, np.sort_complex(np.linalg.eigvals(model.linear_model_.A))
+
+
+def test_subspace_start_is_consistent_under_output_noise():
+    true = np.sort_complex(np.roots([1.0, -1.6, 0.9]))
+    u, y = _noisy_second_order(0.2)
+    model, subspace = _start_poles("subspace", u, y)
+    _, arx = _start_poles("arx", u, y)
+    # The least-squares ARX fit takes the noisy outputs as exact regressors:
+    # its poles shrink towards the origin. The subspace fit's do not.
+    np.testing.assert_allclose(subspace, true, atol=0.01)
+    assert np.abs(arx - true).max() > 0.04
+    # With white output noise alone the Kalman predictor is the free run.
+    assert np.abs(model.linear_model_.K).max() < 0.05
+    # Without noise both starts are the system itself.
+    clean = _noisy_second_order(0.0)
+    np.testing.assert_allclose(_start_poles("arx", *clean)[1], true, atol=1e-6)
+    np.testing.assert_allclose(_start_poles("subspace", *clean)[1], true, atol=1e-6)
+
+
+def test_subspace_start_has_a_stable_one_step_predictor():
+    # On a clean record of the hysteretic oscillator the regression's gain
+    # gives an unstable predictor; the start takes the Riccati gain then.
+    from sysid_nn import HystereticOscillator
+    from sysid_nn._subspace import kalman_gain
+
+    data = HystereticOscillator().generate(1, n_samples=2000, random_state=2024)
+    u, y = data.excitation[0][:, None], data.displacement[0]
+    model = ISSMRegressor(hidden_layer_sizes=(), init="subspace", n_init=1,
+                          max_iter=1, early_stopping=False)  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        lin = model.fit(u, y).linear_model_
+    predictor = lin.A - lin.K @ np.array([[1.0, 0.0, 0.0]])
+    assert np.abs(np.linalg.eigvals(predictor)).max() < 1.0
+    # The Riccati gain of an innovation model's own residuals is its gain.
+    rng = np.random.default_rng(0)
+    K = np.array([[0.5], [0.2]])
+    e = rng.standard_normal((20000, 1))
+    np.testing.assert_allclose(kalman_gain(A_TRUE, C_TRUE, e @ K.T, e), K, atol=0.02)
+
+
+def test_default_start_follows_the_noise_on_the_records():
+    def fit(y):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", UserWarning)  # no noise warning
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            return ISSMRegressor(n_init=1, max_iter=1, random_state=0).fit(u, y)
+
+    u, y = _noisy_second_order(0.0)
+    model = fit(y)
+    assert model.init_ == "arx"
+    assert len(model.restart_scores_) == 1
+    # Noisy: the subspace start, and one restart more from the ARX start;
+    # init_ and linear_model_ are the chosen restart's.
+    u, y = _noisy_second_order(0.05)
+    model = fit(y)
+    assert len(model.restart_scores_) == 2
+    assert model.init_ == ["subspace", "arx"][np.argmax(model.restart_scores_)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ref = ISSMRegressor(init=model.init_, n_init=1, max_iter=1).fit(u, y)
+    np.testing.assert_array_equal(model.linear_model_.A, ref.linear_model_.A)
+    # With several outputs the ARX start kept its accuracy under noise.
+    assert fit(np.column_stack([y, np.roll(y, 1)])).init_ == "arx"
+    with pytest.warns(UserWarning, match="white noise"):
+        ISSMRegressor(init="arx", n_init=1, max_iter=1, random_state=0).fit(u, y)
+
+
+def test_subspace_start_needs_records_long_enough():
+    u, y = _noisy_second_order(0.05, n=12)
+    with pytest.raises(ValueError, match='init="subspace" needs longer'):
+        ISSMRegressor(init="subspace", n_init=1, max_iter=1).fit(u, y)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model = ISSMRegressor(n_init=1, max_iter=1, early_stopping=False).fit(u, y)
+    assert model.init_ == "arx"

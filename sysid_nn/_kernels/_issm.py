@@ -41,26 +41,13 @@ def _network_input(x, U, t, nk, e, z):
         z[n + m + k] = e[k]
 
 
-@njit(cache=True)
-def issm_run(
+@njit(cache=True, inline="always")
+def _loop(
     w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound, jac,
     want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged,
 ):  # fmt: skip
-    """Run the state recurrence; optionally the Jacobian and linearisation.
-
-    ``Xs`` (``(n_rows, n)``) receives the states (history rows hold ``X0``;
-    NaN from a divergence on). ``jac`` is a mode of :mod:`._recurrence`:
-    with ``FULL_JAC``, ``J`` (``(n_modelled * p, n_w)``) receives ``d yhat /
-    d w = H Psi`` by the forward sensitivities of eq. 10; with ``NORMAL``,
-    ``JtJ`` and ``Jtr`` receive the sums of ``J' J`` and ``J' (yhat - y)``
-    (``syrk`` is :data:`._recurrence.SYRK`) and ``J`` is not used (only
-    ``Psi(t-1)`` is kept). With ``want_lin``, ``D[t]`` (``(n, n_z)``)
-    receives ``d x(t) / d z``, whose blocks are ``Phi(t)`` and ``K(t)`` of
-    eq. 12. ``Z`` and ``A`` keep the network
-    inputs and hidden activations for the adjoint pass when they have rows.
-    ``diverged[s]`` is the first modelled index of sequence ``s`` whose state
-    left ``[-bound, bound]``, or -1.
-    """
+    # Inlined twice by issm_run, once with the constants NO_JAC and False, so
+    # that the plain run compiles without the sensitivity branches.
     n = Xs.shape[1]
     p = Y.shape[1]
     m = U.shape[1]
@@ -154,6 +141,34 @@ def issm_run(
                 psi, psi_prev = psi_prev, psi
         row_base += (b - a - h) * p
     rec.finish(Jb, rb, n_b, JtJ, Jtr, syrk)
+
+
+@njit(cache=True)
+def issm_run(
+    w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound, jac,
+    want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged,
+):  # fmt: skip
+    """Run the state recurrence; optionally the Jacobian and linearisation.
+
+    ``Xs`` (``(n_rows, n)``) receives the states (history rows hold ``X0``;
+    NaN from a divergence on). ``jac`` is a mode of :mod:`._recurrence`:
+    with ``FULL_JAC``, ``J`` (``(n_modelled * p, n_w)``) receives ``d yhat /
+    d w = H Psi`` by the forward sensitivities of eq. 10; with ``NORMAL``,
+    ``JtJ`` and ``Jtr`` receive the sums of ``J' J`` and ``J' (yhat - y)``
+    (``syrk`` is :data:`._recurrence.SYRK`) and ``J`` is not used (only
+    ``Psi(t-1)`` is kept). With ``want_lin``, ``D[t]`` (``(n, n_z)``)
+    receives ``d x(t) / d z``, whose blocks are ``Phi(t)`` and ``K(t)`` of
+    eq. 12. ``Z`` and ``A`` keep the network
+    inputs and hidden activations for the adjoint pass when they have rows.
+    ``diverged[s]`` is the first modelled index of sequence ``s`` whose state
+    left ``[-bound, bound]``, or -1.
+    """
+    if jac == rec.NO_JAC and not want_lin:
+        _loop(w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound,
+              rec.NO_JAC, False, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged)  # fmt: skip
+    else:
+        _loop(w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound,
+              jac, want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged)  # fmt: skip
 
 
 @njit(cache=True)

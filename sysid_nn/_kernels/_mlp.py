@@ -31,7 +31,9 @@ def n_params(sizes: np.ndarray, bypass: bool) -> int:
 
 def n_hidden(sizes: np.ndarray) -> int:
     """Total number of hidden units (length of the activation buffer)."""
-    return int(np.sum(sizes[1:-1])) if len(sizes) > 2 else 0
+    # A Python sum: this runs at every kernel call, where np.sum's overhead
+    # of microseconds shows on short records.
+    return sum(int(s) for s in sizes[1:-1])
 
 
 @njit(cache=True, inline="always")
@@ -65,37 +67,38 @@ def mlp_forward(w, sizes, act, bypass, z, acts, out):
     n_layers = sizes.shape[0] - 1
     n_o = sizes[n_layers]
     n_z = sizes[0]
-    p = 0
-    in_off = 0
-    out_off = 0
-    for layer in range(n_layers - 1):
-        n_in = sizes[layer]
-        n_h = sizes[layer + 1]
-        bias = p + n_in * n_h
-        p_next = bias + n_h
-        last = layer == n_layers - 2
-        if last:
-            for k in range(n_o):
-                out[k] = w[p_next + n_h * n_o + k]
-        for j in range(n_h):
-            if layer == 0:
-                s = _dot(w, p + j * n_in, z, 0, n_in)
-            else:
-                s = _dot(w, p + j * n_in, acts, in_off, n_in)
-            a = _activate(s + w[bias + j], act)
-            acts[out_off + j] = a
-            if last:
-                # The output layer summed as each unit of the last hidden
-                # layer is ready: no second pass over the activations.
-                for k in range(n_o):
-                    out[k] += w[p_next + k * n_h + j] * a
-        p = p_next
-        in_off = out_off
-        out_off += n_h
     if n_layers == 1:
         for k in range(n_o):
             out[k] = w[n_z * n_o + k] + _dot(w, k * n_z, z, 0, n_z)
-    p += sizes[n_layers - 1] * n_o + n_o
+        p = n_z * n_o + n_o
+    else:
+        # First hidden layer from z, the others from the previous layer's
+        # activations: separate loops keep the input choice out of the
+        # innermost loops.
+        n_h = sizes[1]
+        bias = n_z * n_h
+        for j in range(n_h):
+            s = _dot(w, j * n_z, z, 0, n_z)
+            acts[j] = _activate(s + w[bias + j], act)
+        p = bias + n_h
+        in_off = 0
+        for layer in range(1, n_layers - 1):
+            n_in = n_h
+            n_h = sizes[layer + 1]
+            bias = p + n_in * n_h
+            out_off = in_off + n_in
+            for j in range(n_h):
+                s = _dot(w, p + j * n_in, acts, in_off, n_in)
+                acts[out_off + j] = _activate(s + w[bias + j], act)
+            p = bias + n_h
+            in_off = out_off
+        bias = p + n_h * n_o
+        for k in range(n_o):
+            s = w[bias + k]
+            for j in range(n_h):
+                s += w[p + k * n_h + j] * acts[in_off + j]
+            out[k] = s
+        p = bias + n_o
     if bypass:
         for k in range(n_o):
             out[k] += _dot(w, p + k * n_z, z, 0, n_z)

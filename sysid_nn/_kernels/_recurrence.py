@@ -16,11 +16,11 @@ happens to it depends on the Jacobian mode:
 
 from __future__ import annotations
 
-import ctypes
-
 import numpy as np
-from numba import njit
-from numba.extending import get_cython_function_address
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import get_cython_function_address, intrinsic
 
 NO_JAC = 0
 FULL_JAC = 1
@@ -36,20 +36,39 @@ def new_block(n_w, jac):
     return np.empty((n, n_w)), np.empty(n)
 
 
-def _blas_syrk():
-    """BLAS ``dsyrk`` (symmetric rank-k update) as a ctypes function.
+def _blas_syrk() -> int:
+    """Address of BLAS ``dsyrk`` (symmetric rank-k update), SciPy's copy.
 
-    Passed to the kernels as an argument rather than referenced as a global,
-    so that they stay cacheable; ``J'J`` by ``dsyrk`` takes half the work of a
-    general matrix product.
+    The kernels take it as a plain integer and call it through
+    :func:`_call_address`: a ctypes function as argument would cost
+    microseconds of typing at every kernel call, and as a global it would
+    stop numba from caching the kernels. ``J'J`` by ``dsyrk`` takes half the
+    work of a general matrix product.
     """
-    address = get_cython_function_address("scipy.linalg.cython_blas", "dsyrk")
-    void = ctypes.c_void_p
-    return ctypes.CFUNCTYPE(None, *[void] * 10)(address)
+    return get_cython_function_address("scipy.linalg.cython_blas", "dsyrk")
 
 
 #: The ``syrk`` argument of the kernels.
 SYRK = _blas_syrk()
+
+
+@intrinsic
+def _call_address(typingctx, address, args):
+    """Call the C function ``void f(void *, ...)`` at ``address`` with ``args``.
+
+    ``args`` is a tuple of integer addresses (``array.ctypes.data``).
+    """
+    sig = types.void(address, args)
+
+    def codegen(context, builder, signature, llvm_args):
+        pointer = ir.IntType(8).as_pointer()
+        values = cgutils.unpack_tuple(builder, llvm_args[1])
+        fnty = ir.FunctionType(ir.VoidType(), [pointer] * len(values))
+        fn = builder.inttoptr(llvm_args[0], fnty.as_pointer())
+        builder.call(fn, [builder.inttoptr(v, pointer) for v in values])
+        return context.get_dummy_value()
+
+    return sig, codegen
 
 
 @njit(cache=True)
@@ -62,12 +81,12 @@ def _flush(Jb, rb, m, JtJ, Jtr, syrk):
     flags = np.array([ord("U"), ord("N")], dtype=np.uint8)
     ints = np.array([Jb.shape[1], m, Jb.shape[1], JtJ.shape[0]], dtype=np.int32)
     one = np.ones(1)
-    syrk(
+    _call_address(syrk, (
         flags[0:].ctypes.data, flags[1:].ctypes.data, ints[0:].ctypes.data,
         ints[1:].ctypes.data, one.ctypes.data, Jb.ctypes.data,
         ints[2:].ctypes.data, one.ctypes.data, JtJ.ctypes.data,
         ints[3:].ctypes.data,
-    )  # fmt: skip
+    ))  # fmt: skip
     Jtr += np.dot(Jb[:m].T, rb[:m])
 
 

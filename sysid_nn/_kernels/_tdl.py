@@ -40,43 +40,89 @@ def _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi):
     n_in = U.shape[1]
     for i in range(1, na + 1):
         src = t - i
-        fed = Yhat if src >= seg_start else Y
-        for k in range(n_out):
-            phi[(i - 1) * n_out + k] = fed[src, k]
+        # Two loops rather than one over a chosen array: selecting between
+        # arrays costs reference counting at every lag.
+        if src >= seg_start:
+            for k in range(n_out):
+                phi[(i - 1) * n_out + k] = Yhat[src, k]
+        else:
+            for k in range(n_out):
+                phi[(i - 1) * n_out + k] = Y[src, k]
     base = na * n_out
     for i in range(nb):
         for k in range(n_in):
             phi[base + i * n_in + k] = U[t - nk - i, k]
 
 
+@njit(cache=True)
+def _compress(S, by_rows):
+    """The nonzeros of ``S`` by rows (``by_rows``) or by columns.
+
+    Returns ``(ptr, idx, val)``: the nonzeros of row (column) ``r`` are
+    ``val[ptr[r]:ptr[r + 1]]`` in columns (rows) ``idx[...]``, in increasing
+    order. The lag transform is the identity or a band of differences, so
+    most of ``S`` is zero; skipping those products changes no value (adding
+    ``0 * x`` to a finite sum leaves it as it is).
+    """
+    n_outer, n_inner = S.shape if by_rows else (S.shape[1], S.shape[0])
+    ptr = np.zeros(n_outer + 1, dtype=np.int64)
+    idx = np.empty(S.size, dtype=np.int64)
+    val = np.empty(S.size)
+    q = 0
+    for r in range(n_outer):
+        for c in range(n_inner):
+            x = S[r, c] if by_rows else S[c, r]
+            if x != 0.0:
+                idx[q] = c
+                val[q] = x
+                q += 1
+        ptr[r + 1] = q
+    return ptr, idx[:q], val[:q]
+
+
 @njit(cache=True, inline="always")
-def _matvec(S, x, out):
-    for r in range(S.shape[0]):
+def _sparse_product(ptr, idx, val, x, out, n):
+    """``out[:n] = M[:n] @ x`` for ``M`` compressed by :func:`_compress`."""
+    for r in range(n):
         s = 0.0
-        for c in range(S.shape[1]):
-            s += S[r, c] * x[c]
+        for q in range(ptr[r], ptr[r + 1]):
+            s += val[q] * x[idx[q]]
         out[r] = s
 
 
 @njit(cache=True, inline="always")
-def _rmatvec(S, x, out):
-    for c in range(S.shape[1]):
-        out[c] = 0.0
-    for r in range(S.shape[0]):
-        xr = x[r]
-        if xr != 0.0:
-            for c in range(S.shape[1]):
-                out[c] += S[r, c] * xr
+def _step(
+    w, sizes, act, bypass, Sr, Yhat, Y, U, t, seg_start, na, nb, nk, bound,
+    phi, z, acts, out, keep, Z, A,
+):  # fmt: skip
+    """One step of the recurrence at row ``t``: False when it diverged.
+
+    ``Sr`` is the lag transform by rows; ``phi``, ``z``, ``acts`` and
+    ``out`` are scratch. The output goes to ``Yhat[t]`` and, with ``keep``
+    and when they have rows, ``z`` and the activations to ``Z[t]`` and
+    ``A[t]``.
+    """
+    _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi)
+    _sparse_product(Sr[0], Sr[1], Sr[2], phi, z, z.shape[0])
+    mlp_forward(w, sizes, act, bypass, z, acts, out)
+    if keep:
+        keep_step(Z, A, t, z, acts)
+    if out_of_range(out, bound):
+        return False
+    for k in range(out.shape[0]):
+        Yhat[t, k] = out[k]
+    return True
 
 
 @njit(cache=True)
 def _sensitivity_rows(
-    w, sizes, act, bypass, S, z, acts, J, r0, lag_rows, n_fed, v, gz, gphi, d1, d2
+    w, sizes, act, bypass, Sc, z, acts, J, r0, lag_rows, n_fed, v, gz, gphi, d1, d2
 ):  # fmt: skip
     """Rows ``J[r0:r0 + n_out]`` of one step by forward sensitivities (eq. 6).
 
     The direct derivative of the network plus, carried through the delay
-    line, those of the ``n_fed`` fed-back outputs at rows ``lag_rows``.
+    line, those of the ``n_fed`` fed-back outputs at rows ``lag_rows``
+    (``Sc`` is the lag transform by columns).
     """
     n_out = v.shape[0]
     for j in range(n_out):
@@ -85,7 +131,8 @@ def _sensitivity_rows(
         v[:] = 0.0
         v[j] = 1.0
         mlp_vjp(w, sizes, act, bypass, z, acts, v, gw, gz, d1, d2)
-        _rmatvec(S, gz, gphi)
+        # Only the fed-back lags' entries of d out / d phi are needed.
+        _sparse_product(Sc[0], Sc[1], Sc[2], gz, gphi, n_fed * n_out)
         for i in range(n_fed):
             srow = lag_rows[i]
             for k in range(n_out):
@@ -95,28 +142,21 @@ def _sensitivity_rows(
                         gw[c] += coef * J[srow + k, c]
 
 
-@njit(cache=True)
-def tdl_run(
+@njit(cache=True, inline="always")
+def _loop(
     w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, jac,
-    Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
+    keep, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
 ):  # fmt: skip
-    """Run the recurrence; optionally its Jacobian or normal equations.
-
-    ``Yhat`` receives the outputs (history rows copied from ``Y``; NaN after
-    a divergence). ``jac`` is a mode of :mod:`._recurrence`: with
-    ``FULL_JAC``, ``J`` (``(n_modelled_rows * n_out, n_w)``) receives ``d
-    yhat / d w`` by forward sensitivities; with ``NORMAL``, ``J`` is a ring
-    of the last ``na + 1`` steps' rows (``((na + 1) * n_out, n_w)``) and
-    ``JtJ``, ``Jtr`` receive the sums over all rows of ``J' J`` and ``J'
-    (yhat - y)`` (``syrk`` is :data:`._recurrence.SYRK`). ``Z`` and ``A``
-    (per-row network inputs and hidden activations) are kept for the adjoint
-    pass when they have rows. ``diverged[s]`` is the first modelled index of
-    sequence ``s`` whose output left ``[-bound, bound]``, or -1.
-    """
+    # Inlined three times by tdl_run, with the constants NO_JAC and no kept
+    # state (the solvers' plain runs), with no kept state (their Jacobian
+    # runs) and in general, so that the loops the solvers run compile
+    # without the branches they do not take.
     n_out = Y.shape[1]
     n_z = sizes[0]
     n_w = w.shape[0]
     width = np.max(sizes)
+    Sr = _compress(S, True)
+    Sc = _compress(S, False)
     phi = np.empty(S.shape[1])
     z = np.empty(n_z)
     acts = np.zeros(max(1, A.shape[1]))
@@ -140,16 +180,11 @@ def tdl_run(
         for t in range(a + h, b):
             if t - seg_start == seg_len:
                 seg_start = t
-            _regressor(Yhat, Y, U, t, seg_start, na, nb, nk, phi)
-            _matvec(S, phi, z)
-            mlp_forward(w, sizes, act, bypass, z, acts, out)
-            keep_step(Z, A, t, z, acts)
-            if out_of_range(out, bound):
+            if not _step(w, sizes, act, bypass, Sr, Yhat, Y, U, t, seg_start, na, nb,
+                         nk, bound, phi, z, acts, out, keep, Z, A):  # fmt: skip
                 diverged[s] = t - a - h
                 fill_rows(Yhat, t, b, np.full(n_out, np.nan))
                 break
-            for k in range(n_out):
-                Yhat[t, k] = out[k]
             if jac == NO_JAC:
                 continue
             local = t - a - h
@@ -163,14 +198,43 @@ def tdl_run(
                 else:
                     lag_rows[i - 1] = (slot - i + (ring if slot < i else 0)) * n_out
             _sensitivity_rows(
-                w, sizes, act, bypass, S, z, acts, J, r0, lag_rows, n_fed, v, gz,
-                gphi, d1, d2,
+                w, sizes, act, bypass, Sc, z, acts, J, r0, lag_rows, n_fed,
+                v, gz, gphi, d1, d2,
             )  # fmt: skip
             if jac == NORMAL:
                 for j in range(n_out):
                     m = add_row(J[r0 + j], out[j] - Y[t, j], Jb, rb, m, JtJ, Jtr, syrk)
         row_base += (b - a - h) * n_out
     finish(Jb, rb, m, JtJ, Jtr, syrk)
+
+
+@njit(cache=True)
+def tdl_run(
+    w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound, jac,
+    Yhat, J, Z, A, JtJ, Jtr, syrk, diverged,
+):  # fmt: skip
+    """Run the recurrence; optionally its Jacobian or normal equations.
+
+    ``Yhat`` receives the outputs (history rows copied from ``Y``; NaN after
+    a divergence). ``jac`` is a mode of :mod:`._recurrence`: with
+    ``FULL_JAC``, ``J`` (``(n_modelled_rows * n_out, n_w)``) receives ``d
+    yhat / d w`` by forward sensitivities; with ``NORMAL``, ``J`` is a ring
+    of the last ``na + 1`` steps' rows (``((na + 1) * n_out, n_w)``) and
+    ``JtJ``, ``Jtr`` receive the sums over all rows of ``J' J`` and ``J'
+    (yhat - y)`` (``syrk`` is :data:`._recurrence.SYRK`). ``Z`` and ``A``
+    (per-row network inputs and hidden activations) are kept for the adjoint
+    pass when they have rows. ``diverged[s]`` is the first modelled index of
+    sequence ``s`` whose output left ``[-bound, bound]``, or -1.
+    """
+    if jac == NO_JAC and Z.shape[0] == 0:
+        _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
+              NO_JAC, False, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
+    elif Z.shape[0] == 0:
+        _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
+              jac, False, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
+    else:
+        _loop(w, sizes, act, bypass, S, Y, U, starts, h, na, nb, nk, seg_len, bound,
+              jac, True, Yhat, J, Z, A, JtJ, Jtr, syrk, diverged)  # fmt: skip
 
 
 @njit(cache=True)
@@ -204,6 +268,7 @@ def tdl_gradient(
     d1 = np.empty(width)
     d2 = np.empty(width)
     adj = np.empty((Y.shape[0], n_out))
+    Sc = _compress(S, False)
     for s in range(starts.shape[0] - 1):
         a = starts[s]
         b = starts[s + 1]
@@ -213,7 +278,7 @@ def tdl_gradient(
         for t in range(b - 1, a + h - 1, -1):
             seg_start = a + h + ((t - a - h) // seg_len) * seg_len
             mlp_vjp(w, sizes, act, bypass, Z[t], A[t], adj[t], grad, gz, d1, d2)
-            _rmatvec(S, gz, gphi)
+            _sparse_product(Sc[0], Sc[1], Sc[2], gz, gphi, na * n_out)
             for i in range(1, na + 1):
                 src = t - i
                 if src < seg_start:
@@ -253,6 +318,7 @@ def tdl_predict_horizon(
     acts = np.empty(max(1, np.sum(sizes[1:-1])))
     out = np.empty(n_out)
     work = np.empty_like(Y)
+    Sr = _compress(S, True)
     for s in range(starts.shape[0] - 1):
         a = starts[s]
         b = starts[s + 1]
@@ -263,7 +329,7 @@ def tdl_predict_horizon(
             first = max(t - horizon + 1, a + h)
             for tt in range(first, t + 1):
                 _regressor(work, Y, U, tt, first, na, nb, nk, phi)
-                _matvec(S, phi, z)
+                _sparse_product(Sr[0], Sr[1], Sr[2], phi, z, n_z)
                 mlp_forward(w, sizes, act, bypass, z, acts, out)
                 for k in range(n_out):
                     work[tt, k] = out[k]
