@@ -60,17 +60,24 @@ print(
 # %%
 # At 100 samples per period the dynamics show in the second difference of
 # the displacement, a few thousandths of it, and 1 % noise swamps that
-# difference. ``fit`` warns then. The TDL network reads the hysteretic state
-# from exactly this difference; from displacement alone, with this noise, it
-# loses its advantage over the linear model (see the pitfalls page of the
-# user guide). Measuring velocity as well, and the ISSM, whose unmeasured
-# states are estimated by its own recursion, are the robust choice.
-with warnings.catch_warnings(record=True) as caught:
-    warnings.simplefilter("always")
-    TDLRegressor(n_init=1, max_iter=5, random_state=0).fit(
-        X_train, [yi[:, 0] for yi in y_train]
+# difference: a one-step fit, which takes the measured outputs as exact
+# regressors, is then biased. The TDL network reads the hysteretic state from
+# exactly this difference. Fitted to the displacement alone, it finds the
+# noise and trains with free segment states instead (``shooting_ ==
+# "free"``): no stage takes a noisy output as an exact value. The one-step
+# schedule (``shooting="measured"``, which warns about the noise) is shown
+# for comparison, on the noise-free test record (with this short budget of
+# one restart and 40 iterations: 0.19 against 0.74).
+disp = [yi[:, 0] for yi in y_train]
+for shooting in ("auto", "measured"):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # the noise warning
+        tdl = TDLRegressor(n_init=1, max_iter=40, random_state=0, shooting=shooting)
+        tdl.fit(X_train, disp, X_val=X_val, y_val=[yi[:, 0] for yi in y_val])
+    score = nrmse(y_test[:, 0], tdl.simulate(X_test))
+    print(
+        f"TDL, shooting={shooting!r:11s} ({tdl.shooting_}): free-run NRMSE {score:.3f}"
     )
-print(next(str(w.message) for w in caught if "noise" in str(w.message))[:240], "...")
 
 # %%
 # A record that starts in motion

@@ -167,8 +167,9 @@ class ISSMRegressor(_RecurrentRegressorBase):
         Segment lengths (samples) of the multiple-shooting stages of the
         simulation focus; at each segment start the measured states restart
         from the measured outputs while the unmeasured ones carry over.
-    alpha : float, default=0.0
-        L2 penalty on the network weights (not on biases or the linear part).
+    alpha : float or "auto", default=0.0
+        L2 penalty on the network weights (not on biases or the linear part);
+        ``"auto"`` is none for the ISSM. The value used is in ``alpha_``.
     %(training_parameters)s
 
     Attributes
@@ -208,6 +209,8 @@ class ISSMRegressor(_RecurrentRegressorBase):
         dynamics show at fine sampling, ``init="auto"`` starts from the
         subspace fit; with one output and ``init="arx"`` or ``"tdl"``, ``fit``
         warns (with displacement alone the ISSM then loses its gain).
+    alpha_ : float
+        The weight penalty used (see ``alpha``).
     coefs_covariance_ : ndarray of shape (n_coefs, n_coefs)
         Delta-method covariance of ``coefs_`` (standardised units): from the
         Jacobian of the final training objective, the innovation weights

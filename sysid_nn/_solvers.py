@@ -29,6 +29,11 @@ if TYPE_CHECKING:  # pragma: no cover
 _STALL_IMPROVEMENT = 1e-3
 
 
+#: Levenberg-Marquardt ends a stage once its damping passes this: the step is
+#: then below rounding of any weight.
+_MAX_DAMPING = 1e16
+
+
 class _EarlyStop(Exception):
     """Raised inside a solver callback to end a stage early."""
 
@@ -54,7 +59,7 @@ class _Objective:
         self.est, self.data, self.seg, self.mask = est, data, seg, mask
         self.rows = data.modelled
         self.root_n = np.sqrt(n_res)
-        self.root_alpha = np.sqrt(est.alpha)
+        self.root_alpha = np.sqrt(est.alpha_)
         self.full_jacobian = full_jacobian
         self._cache_w = None
         self._cache_jac = False
@@ -107,9 +112,19 @@ class _Objective:
         JtJ, Jtr = JtJ / n, Jtr / n
         if self.root_alpha > 0:
             idx = np.flatnonzero(self.mask)
-            JtJ[idx, idx] += self.est.alpha / n
-            Jtr[idx] += self.est.alpha / n * w[idx]
+            JtJ[idx, idx] += self.est.alpha_ / n
+            Jtr[idx] += self.est.alpha_ / n * w[idx]
         return JtJ, Jtr
+
+    def start(self, w):
+        """The solver's parameter vector of the weights ``w`` (the weights)."""
+        return w
+
+    def weights(self, theta):
+        return theta
+
+    def track(self, tracker):
+        return tracker
 
     def loss(self, w):
         r = self.residuals(w)
@@ -125,8 +140,8 @@ class _Objective:
         loss = 0.5 * float(r @ r) / n
         if self.root_alpha > 0:
             wm = np.where(self.mask, w, 0.0)
-            loss += 0.5 * self.est.alpha / n * float(wm @ wm)
-            grad += self.est.alpha / n * wm
+            loss += 0.5 * self.est.alpha_ / n * float(wm @ wm)
+            grad += self.est.alpha_ / n * wm
         return loss, grad
 
 
@@ -155,11 +170,14 @@ def _solve_lm(objective, w, iters, tol, tracker, stall=None):
     costs = [cost]  # after each accepted step
     try:
         while n_eval < iters:
-            if np.max(np.abs(g)) <= tol * max(1.0, cost):
+            if np.max(np.abs(g)) <= tol * max(1.0, cost) or mu > _MAX_DAMPING:
+                # (Past that damping no step lowers the cost to rounding, and
+                # mu would overflow into NaN steps.)
                 return w, n_eval, True
-            d = np.maximum(np.diag(A), 1e-12 * max(1.0, np.max(np.diag(A))))
             try:
-                step = -np.linalg.solve(A + mu * np.diag(d), g)
+                # Objectives with block-structured normal equations solve
+                # their own damped system.
+                step, d = getattr(objective, "damped_step", _damped_step)(A, g, mu)
             except np.linalg.LinAlgError:
                 mu, nu = mu * nu, nu * 2.0
                 n_eval += 1
@@ -191,6 +209,17 @@ def _solve_lm(objective, w, iters, tol, tracker, stall=None):
     except _EarlyStop:
         return w, n_eval, True
     return w, n_eval, False
+
+
+def _damped_step(A, g, mu):
+    """The step ``-(A + mu diag(d))^-1 g``; returns ``(step, d)``."""
+    d = _damping(np.diag(A))
+    return -np.linalg.solve(A + mu * np.diag(d), g), d
+
+
+def _damping(diag: np.ndarray) -> np.ndarray:
+    """Marquardt's damping scale: ``diag(J'J)``, floored for flat directions."""
+    return np.maximum(diag, 1e-12 * max(1.0, np.max(diag)))
 
 
 def _stalled(costs, stall):

@@ -258,7 +258,7 @@ def fit_covariance(est, train) -> None:
     w, p = est.coefs_, est.n_outputs_
     n_w = len(w)
     mask = est._penalty_mask().astype(np.float64)
-    alpha = float(est.alpha)
+    alpha = float(est.alpha_)
     free = _normal_matrix(est, w, train, est._final_segment())
     one = _normal_matrix(est, w, train, 1)
     nan = np.full(p, np.nan)

@@ -133,7 +133,11 @@ def test_noise_warning_tells_how_to_decimate_oversampled_records():
     # 6400 samples left after the validation tail allow that.
     Xs, ys = _oscillator_records(n_records=1, n=8000)
     y = ys[0] + 0.01 * ys[0].std() * np.random.default_rng(1).standard_normal(8000)
-    model = TDLRegressor(hidden_layer_sizes=(), n_init=1, max_iter=2)
+    # (shooting="auto" would train such records with free segment states and
+    # not warn.)
+    model = TDLRegressor(
+        hidden_layer_sizes=(), n_init=1, max_iter=2, shooting="measured"
+    )
     with pytest.warns(UserWarning, match=r"about 6\d samples per period.*1, 3, axis"):
         model.fit(Xs[0], y)
 

@@ -27,7 +27,9 @@ def _fitted(kind, n_outputs=1, length=300, n_seq=2, **params):
         for X in Xs
     ]
     if kind == "tdl":
+        # The kernels' normal equations on the measured-start structure.
         defaults = dict(output_lags=3, input_lags=2, hidden_layer_sizes=(4,))
+        defaults.update(shooting="measured")
         cls = TDLRegressor
     else:
         defaults = dict(n_states=3, hidden_layer_sizes=(4,))
@@ -191,3 +193,27 @@ def test_normal_equations_memory_does_not_grow_with_the_jacobian(kind):
     full_jacobian = 3000 * len(w) * 8
     # Only per-row outputs (a few numbers per row) may grow, not N x P.
     assert growth < 3000 * 8 * 8 < full_jacobian / 3, (growth, full_jacobian)
+
+
+def test_stage_ends_when_no_damped_step_lowers_the_cost():
+    # Every trial step raises the cost: the damping grows until no step can
+    # change the weights, and the stage ends there instead of overflowing
+    # the damping into NaN steps.
+    class Uphill:
+        def residuals(self, w):
+            return np.array([1.0 + float(np.abs(w - 1.0).sum() > 0)])
+
+        def normal_equations(self, w):
+            return np.eye(2), np.array([1.0, -1.0])
+
+    class Tracker:
+        stopped = False
+
+        def __call__(self, w):
+            raise AssertionError("no step may be accepted")
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        w, n_eval, converged = _solve_lm(Uphill(), np.ones(2), 10_000, 1e-8, Tracker())
+    np.testing.assert_array_equal(w, np.ones(2))
+    assert converged and n_eval < 100
