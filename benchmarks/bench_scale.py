@@ -121,13 +121,13 @@ def _instrument(est, log: list):
     )
     _base._Tracker.__call__ = timed("track", _base._Tracker.__call__)
     restart = {"k": -1}
-    fit_one = est._fit_one_serial
+    fit_stages = est._fit_stages
 
-    def fit_one_logged(train, val, seed, k):
-        restart["k"] = k
-        return fit_one(train, val, seed, k)
+    def fit_stages_logged(train, val, run, stop):
+        restart["k"] = run.k
+        return fit_stages(train, val, run, stop)
 
-    est._fit_one_serial = fit_one_logged
+    est._fit_stages = fit_stages_logged
     for name, solve in list(_base._SOLVERS.items()):
 
         def logged(objective, w, iters, tol, tracker, stall=None, solve=solve):
@@ -138,6 +138,7 @@ def _instrument(est, log: list):
             entry.update(
                 restart=restart["k"],
                 seg=int(min(objective.seg, 10**9)),
+                rows=len(objective.rows),
                 budget=int(iters),
                 iters=int(out[1]),
                 seconds=time.perf_counter() - start,
