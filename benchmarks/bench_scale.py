@@ -196,6 +196,8 @@ def _worker(kind: str, case: str, params: dict) -> dict:
         "peak_rss_above_start": max(0, peak - rss_before),
         "rss_before": rss_before,
         "n_iter": int(est.n_iter_),
+        "restart_scores": [float(v) for v in est.restart_scores_],
+        "best_validation_score": est.best_validation_score_,
         "stages": log,
         "when": time.strftime("%Y-%m-%d %H:%M:%S"),
         "load_average": os.getloadavg()[0],
