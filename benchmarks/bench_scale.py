@@ -437,23 +437,33 @@ def _write_table() -> str:
     if capped:
         lines += [
             "",
-            "## Capped budgets",
+            "## Capped budgets, and other schedules",
             "",
-            "| network | N | parameters | fit (s) | peak memory above start (MB) "
-            "| iterations | load |",
-            "|---|---|---|---|---|---|---|",
+            "Rows whose parameters name a `schedule` were measured with an "
+            "earlier training schedule (the code of that commit), in the same "
+            "run as the default row of their case: compare their CPU times.",
+            "",
+            "| network | N | parameters | fit (s) | CPU (s) | peak memory above "
+            "start (MB) | iterations | load |",
+            "|---|---|---|---|---|---|---|---|",
         ]
         for r in capped:
             lines.append(
                 f"| {r['kind'].upper()} | {r['n_samples']:,} | "
-                f"`{json.dumps(r['params'])}` | {r['seconds']:.1f} | "
+                f"`{json.dumps(r['params'])}` | {r['seconds']:.1f} | {_cpu(r)} | "
                 f"{_mb(r['peak_rss_above_start'])} | {r['n_iter']} | "
                 f"{r['load_average']:.1f} |"
             )
         for kind in ("tdl", "issm"):
-            rows = [r for r in capped if r["kind"] == kind and r["case"] != "field"]
+            rows = [
+                r
+                for r in capped
+                if r["kind"] == kind
+                and r["case"] != "field"
+                and "schedule" not in r["params"]
+            ]
             lines.append(
-                f"| {kind.upper()} memory slope (log-log) | | | | "
+                f"| {kind.upper()} memory slope (log-log) | | | | | "
                 f"{_slope(*_above_mb(rows))} | | |"
             )
     lines += [

@@ -602,6 +602,15 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         """Whether noise on the outputs' second difference costs this model."""
         return True
 
+    def _independent_segments(self) -> bool:
+        """Whether each shooting segment restarts from measured data alone.
+
+        Then a stage's loss is a sum over segments, and the stages before
+        the last may see a subset of them (:func:`_schedule.stage_data
+        <sysid_nn._schedule.stage_data>`).
+        """
+        return True
+
     def _fallback(self, w: np.ndarray, train: _Data, val: _Data | None):
         """The linear starting model when every restart's free run diverged.
 
@@ -735,7 +744,8 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
             # Patience counts the last stage's own steps: steps of earlier
             # stages without improvement must not end it before it starts.
             tracker.since_best = 0
-            data = train if last else stage_data(train, seg, restart.rng)
+            subset = not last and self._independent_segments()
+            data = stage_data(train, seg, restart.rng) if subset else train
             n_data = len(data.modelled) * self.n_outputs_
             # The penalty stays relative to the whole record.
             alpha = self.alpha * (n_data / n_res)

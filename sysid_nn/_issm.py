@@ -394,6 +394,13 @@ default=None
         meaning = "the measured outputs in your units, then the unmeasured states"
         return (self.n_states_,), count, meaning
 
+    def _independent_segments(self) -> bool:
+        # The unmeasured states carry over from one segment to the next: a
+        # block cut out of a record starts them at zero. Measured on the
+        # generated Bouc-Wen benchmark, stages on such blocks made the test
+        # error 56 % larger (6.9e-6 against 4.4e-6 m).
+        return False
+
     def _noise_sensitive(self) -> bool:
         # Measured: with displacement and velocity the ISSM kept its accuracy
         # at 1-3 % noise; with displacement alone it fell to the linear level.

@@ -242,8 +242,20 @@ def test_halving_without_validation_ranks_by_the_training_free_run():
     assert np.all(np.isfinite(model.restart_scores_))
 
 
-def test_issm_restarts_are_halved_too():
-    Xs, ys = _records(n=4, length=200)
+def test_issm_restarts_are_halved_too(small_subsets, monkeypatch):
+    # ... but its stages see the whole records: its unmeasured states carry
+    # over between segments, so a block of them is not a sum of segments.
+    from sysid_nn import _base
+
+    solve = _base._SOLVERS["lm"]
+    rows = []
+
+    def spying(objective, w, iters, tol, tracker, stall=None):
+        rows.append(len(objective.rows))
+        return solve(objective, w, iters, tol, tracker, stall)
+
+    monkeypatch.setitem(_base._SOLVERS, "lm", spying)
+    Xs, ys = _records(n=4, length=400)
     model = ISSMRegressor(
         hidden_layer_sizes=(3,), shooting_segments=(10,), max_iter=8, n_init=2,
         random_state=0,
@@ -254,3 +266,4 @@ def test_issm_restarts_are_halved_too():
         warnings.simplefilter("ignore", ConvergenceWarning)
         _fit(model, Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
     assert [first for _, first, _, _ in log] == [0, 0, _schedule.HALVING_AFTER]
+    assert rows and set(rows) == {1200}
