@@ -383,7 +383,8 @@ before / now | validation loss of the chosen restart, before / now |
 - The ISSM sees whole records (its unmeasured states carry over between
   segments); only the halving saves time, and its one-step stage, 100
   iterations in every restart, is 60 % of its fit.
-- The ISSM row at N = 100 000 above predates the change.
+- ISSM, N = 10^5 (halving only): 68.9 s CPU; 120.1 s in an earlier session
+  with the previous schedule, at another load (not a ratio).
 - N = 10^6, default TDL: not run to the end at this load. Estimated from the
   10^5 run's evaluation counts and the per-evaluation costs above: about
   320 s CPU, 80 % of it validation free runs over the whole record; peak
