@@ -456,7 +456,11 @@ def _write_table() -> str:
     ]
     for kind in ("tdl", "issm"):
         rows = [r for (k, c), r in latest.items() if k == kind and c != "field"]
-        rows += [r for r in capped if r["kind"] == kind and r["case"] != "field"]
+        rows += [
+            r
+            for r in capped
+            if r["kind"] == kind and r["case"] != "field" and r["stages"]
+        ]
         rows.sort(key=lambda r: r["n_samples"])
         costs = [_run_costs(r) for r in rows]
         for r, (normal, plain) in zip(rows, costs, strict=True):
