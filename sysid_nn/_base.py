@@ -33,6 +33,7 @@ from sysid_nn import _progress, _uncertainty
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._progress import report_stage
 from sysid_nn._record_checks import check_sampling, trim_padding
+from sysid_nn._schedule import HALVING_AFTER, stage_data, survivors
 from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 from sysid_nn._state_estimation import (
     _FULL_BAND,
@@ -540,10 +541,20 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
             n_runs = self._n_restarts()
             seeds = rng.randint(np.iinfo(np.int32).max, size=n_runs)
             start = time.perf_counter()
-            runs = Parallel(n_jobs=self.n_jobs if n_runs > 1 else None)(
-                delayed(self._fit_one)(train, val, seed, k)
-                for k, seed in enumerate(seeds)
-            )
+            # Successive halving (see sysid_nn._schedule): every restart runs
+            # the first stages, the better half by its score the rest.
+            n_stages = len(self._stages())
+            halving = n_runs > 1 and n_stages > HALVING_AFTER
+            restarts = [_Restart(k, seed) for k, seed in enumerate(seeds)]
+            cut = HALVING_AFTER if halving else n_stages
+            results = self._run_restarts(train, val, restarts, cut)
+            if halving:
+                kept = survivors([run.score for _, run in results])
+                going_on = [results[k][0] for k in kept]
+                done = self._run_restarts(train, val, going_on, n_stages)
+                for k, result in zip(kept, done, strict=True):
+                    results[k] = result
+            runs = [run for _, run in results]
             best = min(range(len(runs)), key=lambda k: runs[k].score)
             chosen = runs[best]
             if not np.all(np.isfinite(chosen.w)):
@@ -640,6 +651,15 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
 
     def _noise_sensitive(self) -> bool:
         """Whether noise on the outputs' second difference costs this model."""
+        return True
+
+    def _independent_segments(self) -> bool:
+        """Whether each shooting segment restarts from measured data alone.
+
+        Then a stage's loss is a sum over segments, and the stages before
+        the last may see a subset of them (:func:`_schedule.stage_data
+        <sysid_nn._schedule.stage_data>`).
+        """
         return True
 
     def _fallback(self, w: np.ndarray, train: _Data, val: _Data | None):
@@ -739,13 +759,13 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         stages.append((_FREE_RUN, self.max_iter))
         return stages
 
-    def _stage_objective(self, train: _Data, seg: int, mask, n_res: int):
-        """The objective of a stage on segments of ``seg`` samples."""
+    def _stage_objective(self, data: _Data, seg: int, mask, n_res: int, alpha):
+        """The objective of a stage on segments of ``seg`` samples of ``data``."""
         if self.shooting_ == "free" and 1 < seg < _FREE_RUN:
-            return self._free_state_objective(train, seg, mask, n_res)
-        return _Objective(self, train, seg, mask, n_res)
+            return self._free_state_objective(data, seg, mask, n_res, alpha)
+        return _Objective(self, data, seg, mask, n_res, alpha=alpha)
 
-    def _free_state_objective(self, train, seg, mask, n_res):  # pragma: no cover
+    def _free_state_objective(self, data, seg, mask, n_res, alpha):  # pragma: no cover
         raise NotImplementedError
 
     def _choose_shooting(self, noisy: bool) -> str:
@@ -760,30 +780,53 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         """The weight penalty of ``alpha="auto"``."""
         return 0.0
 
-    def _fit_one(self, train: _Data, val: _Data | None, seed: int, k: int):
-        """One restart through the whole schedule; returns a :class:`_Run`."""
+    def _run_restarts(self, train, val, restarts, stop):
+        """Run every restart up to stage ``stop``, in parallel.
+
+        Returns ``(restart, run)`` pairs in the order of ``restarts``.
+        """
+        return Parallel(n_jobs=self.n_jobs if len(restarts) > 1 else None)(
+            delayed(self._fit_one)(train, val, restart, stop) for restart in restarts
+        )
+
+    def _fit_one(self, train: _Data, val: _Data | None, restart, stop: int):
+        """One restart through the stages before ``stop``; see ``_fit_stages``."""
         # The linear algebra here is small (tens to hundreds of weights):
         # threaded BLAS only spins, and restarts already run in parallel.
         with _single_threaded_blas():
-            return self._fit_one_serial(train, val, seed, k)
+            return self._fit_stages(train, val, restart, stop)
 
-    def _fit_one_serial(self, train, val, seed, k):
-        rng = np.random.RandomState(seed)
-        w = self._initial_params(rng)
+    def _fit_stages(self, train, val, restart, stop):
+        """Run ``restart`` from its next stage up to stage ``stop``.
+
+        Every stage but the last sees the records :func:`_schedule.stage_data
+        <sysid_nn._schedule.stage_data>` selects. Returns ``(restart, run)``:
+        the advanced :class:`_Restart` and the :class:`_Run` it would give if
+        it ended here (best validation weights and the selection score).
+        """
         mask = self._penalty_mask()
         n_res = len(train.modelled) * self.n_outputs_
         stages = self._stages()
         final_seg = self._final_segment()
-        tracker = _Tracker(self, val, final_seg, w)
-        converged = True
-        n_iter = 0
-        for i_stage, (seg, iters) in enumerate(stages):
+        if restart.w is None:
+            restart.rng = np.random.RandomState(restart.seed)
+            restart.w = self._initial_params(restart.rng)
+            restart.tracker = _Tracker(self, val, final_seg, restart.w)
+        tracker, w, k = restart.tracker, restart.w, restart.k
+        tracker.est = self  # not the copy a worker process unpickled
+        for i_stage in range(restart.stage, stop):
+            seg, iters = stages[i_stage]
             last = i_stage == len(stages) - 1
             tracker.patience = self.n_iter_no_change if last else None
             # Patience counts the last stage's own steps: steps of earlier
             # stages without improvement must not end it before it starts.
             tracker.since_best = 0
-            objective = self._stage_objective(train, seg, mask, n_res)
+            subset = not last and self._independent_segments()
+            data = stage_data(train, seg, restart.rng) if subset else train
+            n_data = len(data.modelled) * self.n_outputs_
+            # The penalty stays relative to the whole record.
+            alpha = self.alpha_ * (n_data / n_res)
+            objective = self._stage_objective(data, seg, mask, n_data, alpha)
             theta = objective.start(w)
             if not np.isfinite(objective.loss(theta)):
                 continue  # the stage diverges from here on: skip it
@@ -792,9 +835,9 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
                 objective, theta, iters, self.tol, objective.track(tracker), stall
             )
             w = objective.weights(theta)
-            n_iter += nit
+            restart.n_iter += nit
             if last:
-                converged = ok or tracker.stopped
+                restart.converged = ok or tracker.stopped
             report_stage(
                 self,
                 (k, self._n_restarts()),
@@ -804,6 +847,7 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
                 functools.partial(objective.loss, theta),
                 tracker.best_loss,
             )
+        restart.w, restart.stage = w, max(stop, restart.stage)
         if val is not None:
             w = tracker.best_w
             val_loss = tracker.best_loss
@@ -811,14 +855,15 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
             val_loss = np.nan
         loss = _Objective(self, train, final_seg, mask, n_res).loss(w)
         score = val_loss if val is not None else loss
-        return _Run(
+        run = _Run(
             w,
             loss,
             val_loss,
             score if np.isfinite(score) else np.inf,
-            n_iter,
-            converged,
+            restart.n_iter,
+            restart.converged,
         )
+        return restart, run
 
     # ----------------------------------------------------------- predicting
     def _simulate(
@@ -1163,6 +1208,24 @@ class _Run:
     score: float
     n_iter: int
     converged: bool
+
+
+@dataclass
+class _Restart:
+    """One restart's progress through the training schedule.
+
+    ``stage`` is the next stage to run; ``rng`` draws the initial weights,
+    then each stage's subset of the records (see :mod:`sysid_nn._schedule`).
+    """
+
+    k: int
+    seed: int
+    w: np.ndarray | None = None
+    tracker: _Tracker | None = None
+    rng: np.random.RandomState | None = None
+    n_iter: int = 0
+    converged: bool = True
+    stage: int = 0
 
 
 class _Tracker:

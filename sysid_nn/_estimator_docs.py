@@ -25,7 +25,8 @@ tol : float, default=1e-8
     that small).
 n_init : int, default=4
     Random restarts; the one with the best validation (or training) loss
-    is kept.
+    is kept. All run the first two stages, the better half the rest
+    (successive halving; see the user guide's training page).
 early_stopping : bool, default=True
     Keep, over all accepted steps of all stages, the weights with the best
     validation loss (free run for the simulation focus, one step for the
@@ -76,7 +77,8 @@ best_validation_score_ : float or None
     Negative validation mean squared error (standardised) of the chosen
     weights.
 restart_scores_ : ndarray
-    Negative selection loss of every restart.
+    Negative selection loss of every restart (of a restart dropped by the
+    successive halving, at the point it stopped).
 fit_time_ : float
     Seconds spent in training."""
 _VARIANCE_ATTRIBUTES_DOC = """\

@@ -432,6 +432,13 @@ default=None
         meaning = "the measured outputs in your units, then the unmeasured states"
         return (self.n_states_,), count, meaning
 
+    def _independent_segments(self) -> bool:
+        # The unmeasured states carry over from one segment to the next: a
+        # block cut out of a record starts them at zero. Measured on the
+        # generated Bouc-Wen benchmark, stages on such blocks made the test
+        # error 56 % larger (6.9e-6 against 4.4e-6 m).
+        return False
+
     def _noise_sensitive(self) -> bool:
         # Measured: with displacement and velocity the ISSM kept its accuracy
         # at 1-3 % noise; with displacement alone and the ARX (or TDL) start
@@ -561,12 +568,13 @@ default=None
         """Index in ``_linear_starts`` of restart ``k``: the extra one is last."""
         return int(k >= self.n_init) * (len(self._linear_starts) - 1)
 
-    def _fit_one(self, train, val, seed, k):
+    def _fit_one(self, train, val, restart, stop):
         if len(self._linear_starts) == 1:
-            return super()._fit_one(train, val, seed, k)
-        restart = copy.copy(self)
-        restart.linear_model_ = self._linear_starts[self._start_of(k)][1]
-        return super(ISSMRegressor, restart)._fit_one(train, val, seed, k)
+            return super()._fit_one(train, val, restart, stop)
+        # The restart's own linear start, on a shallow copy of the estimator.
+        est = copy.copy(self)
+        est.linear_model_ = self._linear_starts[self._start_of(restart.k)][1]
+        return super(ISSMRegressor, est)._fit_one(train, val, restart, stop)
 
     def _n_restarts(self) -> int:
         # A TDL start is deterministic: the restarts were the TDL's.

@@ -99,10 +99,13 @@ class _FreeStateObjective:
     outputs of every segment (``n_state`` rows of all outputs, standardised,
     oldest last as in the history rows), started from ``start_data``'s
     values, a low-passed copy of the records for noisy ones. The penalty is
-    that of :class:`sysid_nn._solvers._Objective` on the weights.
+    that of :class:`sysid_nn._solvers._Objective` on the weights (``alpha``,
+    by default the estimator's ``alpha_``).
     """
 
-    def __init__(self, est, data, seg_len, mask, n_res, n_state, start_data=None):
+    def __init__(
+        self, est, data, seg_len, mask, n_res, n_state, start_data=None, alpha=None
+    ):
         self.est, self.mask, self.seg = est, mask, seg_len
         self.p = data.Y.shape[1]
         self.segments = _segment(data, seg_len, self.p)
@@ -110,7 +113,7 @@ class _FreeStateObjective:
         self.m = n_state * self.p
         self.n_seg = len(self.segments.first)
         self.n = float(n_res)
-        self.alpha = est.alpha_
+        self.alpha = est.alpha_ if alpha is None else alpha
         src = _segment(start_data, seg_len, self.p) if start_data is not None else None
         Y = (src or self.segments).data.Y
         first = self.segments.first

@@ -45,6 +45,8 @@ class _Objective:
     are the errors of the recurrence restarted every ``seg`` samples. With
     ``full_jacobian`` the normal equations are formed from the full Jacobian
     (memory ``O(N P)``) instead of being accumulated by the kernels.
+    ``alpha`` replaces the estimator's penalty (a stage on part of the records
+    scales it to keep the penalty relative to the whole record).
     """
 
     def __init__(
@@ -55,11 +57,13 @@ class _Objective:
         mask: np.ndarray,
         n_res: int,
         full_jacobian: bool = False,
+        alpha: float | None = None,
     ):
         self.est, self.data, self.seg, self.mask = est, data, seg, mask
         self.rows = data.modelled
         self.root_n = np.sqrt(n_res)
-        self.root_alpha = np.sqrt(est.alpha_)
+        self.alpha = est.alpha_ if alpha is None else alpha
+        self.root_alpha = np.sqrt(self.alpha)
         self.full_jacobian = full_jacobian
         self._cache_w = None
         self._cache_jac = False
@@ -112,8 +116,8 @@ class _Objective:
         JtJ, Jtr = JtJ / n, Jtr / n
         if self.root_alpha > 0:
             idx = np.flatnonzero(self.mask)
-            JtJ[idx, idx] += self.est.alpha_ / n
-            Jtr[idx] += self.est.alpha_ / n * w[idx]
+            JtJ[idx, idx] += self.alpha / n
+            Jtr[idx] += self.alpha / n * w[idx]
         return JtJ, Jtr
 
     def start(self, w):
@@ -140,8 +144,8 @@ class _Objective:
         loss = 0.5 * float(r @ r) / n
         if self.root_alpha > 0:
             wm = np.where(self.mask, w, 0.0)
-            loss += 0.5 * self.est.alpha_ / n * float(wm @ wm)
-            grad += self.est.alpha_ / n * wm
+            loss += 0.5 * self.alpha / n * float(wm @ wm)
+            grad += self.alpha / n * wm
         return loss, grad
 
 

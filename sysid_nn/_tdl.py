@@ -331,10 +331,15 @@ such, default=None
     def _auto_alpha(self) -> float:
         return _NOISY_ALPHA if self.shooting_ == "free" else 0.0
 
-    def _free_state_objective(self, train, seg, mask, n_res):
+    def _free_state_objective(self, data, seg, mask, n_res, alpha):
         return _FreeStateObjective(
-            self, train, seg, mask, n_res, self.output_lags, self._smooth_train
+            self, data, seg, mask, n_res, self.output_lags, self._smooth_train, alpha
         )
+
+    def _independent_segments(self) -> bool:
+        # Free-state stages start their segments from the low-passed whole
+        # records; they see the whole records, not subsets.
+        return self.shooting_ == "measured"
 
     def _after_fit(self, train, val) -> None:
         self._smooth_train = None  # a copy of the records: not kept

@@ -549,9 +549,9 @@ def test_last_stage_gets_its_own_patience():
     Xs, ys = _records(n=4, length=300, seed=5)
     model = _small(hidden_layer_sizes=(4,), max_iter=60, n_iter_no_change=10)
     stages = []
-    original = model._fit_one_serial
+    original = model._fit_stages
 
-    def spy(train, val, seed, k):
+    def spy(train, val, restart, stop):
         from sysid_nn import _base
 
         solve = _base._SOLVERS["lm"]
@@ -563,11 +563,11 @@ def test_last_stage_gets_its_own_patience():
 
         _base._SOLVERS["lm"] = counting
         try:
-            return original(train, val, seed, k)
+            return original(train, val, restart, stop)
         finally:
             _base._SOLVERS["lm"] = solve
 
-    model._fit_one_serial = spy
+    model._fit_stages = spy
     model.fit(Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
     seg, n_eval, stopped = stages[-1]
     assert seg == _FREE_RUN
