@@ -37,6 +37,7 @@ from sysid_nn._schedule import HALVING_AFTER, stage_data, survivors
 from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 from sysid_nn._state_estimation import (
     _FULL_BAND,
+    _segments,
     fit_initial_condition,
     noise_band,
     noise_variance,
@@ -530,7 +531,7 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         if val is not None:
             val.skip = skip
         self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train.Y).max())
-        modelled = [(a + train.h, b) for a, b in pairwise(train.starts)]
+        modelled = _segments(train.starts, train.h)
         spp, advice = check_sampling(type(self).__name__, train.Y, modelled)
         self._check_noise(train, spp, advice)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
@@ -595,18 +596,14 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         one-step stage fits to it), a small fraction of the outputs. White
         noise on the records enters that difference six-fold in variance.
         With ``spp`` (samples per period) above ``_DECIMATE_NOISY``, the
-        warning adds ``advice`` on decimating the records.
+        warning adds ``advice`` on decimating the records. The estimate also
+        sets what depends on it: ``shooting_``, ``alpha_`` and the band edge
+        the free-state schedule low-passes the records at.
         """
         var = noise_variance(train.Y, train.U, train.starts, train.h, self.input_delay)
         self.output_noise_std_ = np.sqrt(var) * self._y_scale
-        # Read by starts that are biased under such noise (the ISSM's).
-        self._noisy_outputs = False
-        d2 = np.concatenate(
-            [
-                np.diff(train.Y[a + train.h : b], 2, axis=0)
-                for a, b in pairwise(train.starts)
-            ]
-        )
+        modelled = _segments(train.starts, train.h)
+        d2 = np.concatenate([np.diff(train.Y[a:b], 2, axis=0) for a, b in modelled])
         # The noise's share of the second difference's spread (at most 1).
         ratio = (
             np.sqrt(np.minimum(6.0 * var / np.maximum(d2.var(axis=0), 1e-300), 1))
@@ -614,6 +611,7 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
             else np.zeros_like(var)
         )
         noisy = bool(np.any(ratio > _NOISY_DIFFERENCE))
+        # Read by starts that are biased under such noise (the ISSM's).
         self._noisy_outputs = noisy
         edge = noise_band(train.Y, train.starts, train.h, var) if noisy else 0.5
         self._band_edge = edge

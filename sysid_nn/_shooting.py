@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sysid_nn._solvers import _damping
+from sysid_nn._state_estimation import _segments
 
 #: Rows (times outputs) of one kernel call when forming the normal
 #: equations: bounds the full Jacobian block held at once.
@@ -44,12 +45,14 @@ class _Segments:
 
     ``data`` stacks one sequence per segment whose ``h`` history rows are
     copies of the rows before the segment; ``first`` are the rows of
-    ``data`` where each segment's modelled rows begin; ``chunks`` are
-    ``(first segment, end segment)`` ranges of at most ``_CHUNK_ROWS`` rows.
+    ``data`` where each segment's modelled rows begin, ``origin`` the rows of
+    the records where they began; ``chunks`` are ``(first segment, end
+    segment)`` ranges of at most ``_CHUNK_ROWS`` rows.
     """
 
     data: object
     first: np.ndarray
+    origin: np.ndarray
     chunks: list
 
 
@@ -61,8 +64,7 @@ def _segment(data, seg_len: int, n_out: int) -> _Segments:
     from sysid_nn._base import _Data  # the base imports this module
 
     h, pieces = data.h, []
-    for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
-        t = a + h
+    for t, b in _segments(data.starts, h):
         while t < b:
             end = min(t + seg_len, b)
             if b - end < seg_len // 2:
@@ -79,7 +81,8 @@ def _segment(data, seg_len: int, n_out: int) -> _Segments:
             chunks.append((lo, s - 1))
             lo = s - 1
     chunks.append((lo, len(pieces)))
-    return _Segments(data=seg, first=starts[:-1] + h, chunks=chunks)
+    origin = np.array([t for t, _ in pieces], dtype=np.int64)
+    return _Segments(data=seg, first=starts[:-1] + h, origin=origin, chunks=chunks)
 
 
 def _chunk(data, lo: int, hi: int):
@@ -114,10 +117,10 @@ class _FreeStateObjective:
         self.n_seg = len(self.segments.first)
         self.n = float(n_res)
         self.alpha = est.alpha_ if alpha is None else alpha
-        src = _segment(start_data, seg_len, self.p) if start_data is not None else None
-        Y = (src or self.segments).data.Y
-        first = self.segments.first
-        self._v0 = np.stack([Y[first - i] for i in range(1, n_state + 1)], axis=1)
+        # The starting states: the rows before each segment in the records.
+        Y = (data if start_data is None else start_data).Y
+        origin = self.segments.origin
+        self._v0 = np.stack([Y[origin - i] for i in range(1, n_state + 1)], axis=1)
         self.n_w = None
         self._chunks = [
             _chunk(self.segments.data, lo, hi) for lo, hi in self.segments.chunks
@@ -156,10 +159,12 @@ class _FreeStateObjective:
         parts = []
         for chunk in self._chunks:
             Yhat, Y, _, diverged = self._chunk_run(w, chunk, False)
-            if diverged:
-                return np.full(int(self.n) + int(self.mask.sum()), np.inf)
+            if diverged:  # the later chunks need not run
+                r = np.full(int(self.n), np.inf)
+                break
             parts.append((Yhat - Y).ravel())
-        r = np.concatenate(parts) / np.sqrt(self.n)
+        else:
+            r = np.concatenate(parts) / np.sqrt(self.n)
         if self.alpha > 0:
             r = np.concatenate([r, np.sqrt(self.alpha / self.n) * w[self.mask]])
         return r

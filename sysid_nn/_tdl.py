@@ -103,7 +103,9 @@ class TDLRegressor(_RecurrentRegressorBase):
         ``shooting_segments`` of at least 100 samples, then the free run).
         ``"auto"`` chooses ``"free"`` when the estimated noise exceeds 2 % of
         the spread of the outputs' second difference (see
-        ``output_noise_std_``) and the solver is ``"lm"``. The choice is in
+        ``output_noise_std_``) while staying below 10 % of the outputs' spread
+        (a larger estimate is a linear model's misfit, not noise), a band of
+        the spectrum clears it, and the solver is ``"lm"``. The choice is in
         ``shooting_``.
     alpha : float or "auto", default="auto"
         L2 penalty on the network weights (not on biases or the bypass),
@@ -314,9 +316,10 @@ such, default=None
         return np.hstack(blocks)
 
     def _choose_shooting(self, noisy: bool) -> str:
-        if self.shooting == "free" and (
-            self.solver != "lm" or self.focus != "simulation"
-        ):
+        # Segment states are fitted by Levenberg-Marquardt's eliminated step,
+        # in the simulation schedule's shooting stages.
+        supported = self.solver == "lm" and self.focus == "simulation"
+        if self.shooting == "free" and not supported:
             raise ValueError(
                 "shooting='free' fits segment states with Levenberg-Marquardt "
                 "in the simulation schedule; it needs solver='lm' and "
@@ -324,8 +327,7 @@ such, default=None
                 f"focus={self.focus!r}. Use shooting='measured' or 'auto'."
             )
         if self.shooting == "auto":
-            free = noisy and self.solver == "lm" and self.focus == "simulation"
-            return "free" if free else "measured"
+            return "free" if noisy and supported else "measured"
         return self.shooting
 
     def _auto_alpha(self) -> float:
