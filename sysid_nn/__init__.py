@@ -23,7 +23,8 @@ _LAZY = {
     "HystereticOscillator": "sysid_nn.oscillator",
     "TDLRegressor": "sysid_nn._tdl",
     "ISSMRegressor": "sysid_nn._issm",
-    "DivergenceWarning": "sysid_nn._base",
+    "DivergenceWarning": "sysid_nn._exceptions",
+    "InconsistentVersionWarning": "sysid_nn._exceptions",
     "UnstablePredictorWarning": "sysid_nn._issm",
 }
 
@@ -31,6 +32,7 @@ __all__ = [
     "DivergenceWarning",
     "HystereticOscillator",
     "ISSMRegressor",
+    "InconsistentVersionWarning",
     "TDLRegressor",
     "UnstablePredictorWarning",
 ]

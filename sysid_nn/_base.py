@@ -1,233 +1,65 @@
-"""Shared machinery of the recurrent-network estimators.
+"""The recurrent-network estimators' common class: what a fit and a call do.
 
-:class:`_RecurrentRegressorBase` holds everything the TDL and ISSM networks
-have in common: input validation for one sequence or a list of sequences,
-internal standardisation, the staged training loop (one-step fit, multiple
-shooting, free run), the three solvers, random restarts, validation
-selection, divergence handling and the ``predict``/``simulate``/``score``
-methods. A subclass supplies the structure: how a sequence is laid out for
-its kernels, the initial parameters, and the kernels themselves.
+:class:`_RecurrentRegressorBase` is the estimator: parameters, the order of
+a fit (check and split the records, standardise, diagnose, prepare the
+structure, train, keep the result) and the calls on a fitted model
+(``predict``, ``simulate``, ``score``). The parts live elsewhere, each by
+name:
+
+* the data layer, :mod:`sysid_nn._data`: sequence checks, scaling, stacking;
+* the record diagnosis, :mod:`sysid_nn._diagnosis`: the estimates the
+  ``"auto"`` settings decide by, and the noise warning;
+* the schedule, :mod:`sysid_nn._schedule`: the stages, their data, halving;
+* the training driver, :mod:`sysid_nn._training`: restarts, the choice
+  among them, the fallback, the histories;
+* the structure: the subclass (:mod:`sysid_nn._tdl`, :mod:`sysid_nn._issm`)
+  supplies its kernels, starting weights and initial conditions through the
+  hooks below, and its weight layout through :mod:`sysid_nn._layout`;
+* the state estimator, :mod:`sysid_nn._state_estimation`: initial
+  conditions fitted to a measured window (``y_init``).
+
+A fit is atomic: it works on a copy of the estimator and the fitted state
+replaces the old only when it has completed.
 """
 
 from __future__ import annotations
 
-import functools
+import dataclasses
 import numbers
-import threading
-import time
 import warnings
-from contextlib import contextmanager
-from dataclasses import dataclass
 from itertools import pairwise
 
 import numpy as np
-import threadpoolctl
-from joblib import Parallel, delayed
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import ConvergenceWarning
-from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
-from sklearn.utils.validation import _check_feature_names, check_is_fitted
+from sklearn.utils.validation import check_is_fitted
 
-from sysid_nn import _progress, _uncertainty
-from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._progress import report_stage
-from sysid_nn._record_checks import check_sampling, trim_padding
-from sysid_nn._schedule import HALVING_AFTER, stage_data, survivors
-from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
-from sysid_nn._state_estimation import (
-    _FULL_BAND,
-    _segments,
-    fit_initial_condition,
-    noise_band,
-    noise_variance,
+from sysid_nn import _uncertainty
+from sysid_nn._data import (
+    _FREE_RUN,
+    _Data,
+    _mean_scale,
+    _SequenceIO,
+    is_sequence_list,
 )
-from sysid_nn._validation import check_same_width
+from sysid_nn._diagnosis import RecordDiagnosis, diagnose_records, warn_noise
+from sysid_nn._estimator_docs import document_estimator
+from sysid_nn._exceptions import DivergenceWarning, check_version, version_stamp
+from sysid_nn._record_checks import trim_padding
+from sysid_nn._schedule import training_stages
+from sysid_nn._solvers import _Objective
+from sysid_nn._state_estimation import fit_initial_condition
+from sysid_nn._training import _single_threaded_blas, fit_stages, train
 
 __all__ = ["DivergenceWarning"]
 
 #: A free run whose standardised output exceeds this multiple of the largest
 #: standardised training output is declared divergent.
 _DIVERGENCE_FACTOR = 100.0
-#: Share of ``max_iter`` spent on the one-step stage and on each multiple-
-#: shooting stage of the simulation schedule (100 and 40 of 150).
-_ONE_STEP_SHARE = 2.0 / 3.0
-_SHOOTING_SHARE = 4.0 / 15.0
-_FREE_RUN = np.iinfo(np.int64).max // 4
-#: The stages before the last end when Levenberg-Marquardt's cost stalls over
-#: this many accepted steps (see ``sysid_nn._solvers._solve_lm``), not only at
-#: their budget. Measured on the accuracy benchmark and an 11 x 7200 sample
-#: record set, the stages still gained 1-30 % per 10 steps at their budget, so
-#: this rarely ends them; a looser threshold (5 %) made the ISSM less accurate.
-_STALL_STEPS = 10
-#: ``fit`` warns when the estimated output noise makes up more than this share
-#: of the spread of the outputs' second difference. Measured on the oscillator
-#: at 100 samples per period: at a share of 0.05 (0.01 % noise) the TDL lost
-#: its gain over the linear model with one record (0.985 against 0.035 from
-#: clean records) and kept most of it with five (0.079 against 0.012).
-_NOISY_DIFFERENCE = 0.02
-#: Free-state shooting skips segments shorter than this: with three fitted
-#: initial outputs per 20 or 50 samples the states absorb the fit (measured
-#: on the oscillator at 1 % noise, five records: 0.13 with a 50-sample stage
-#: first, 0.034 without).
-_MIN_FREE_SEGMENT = 100
-#: ``shooting="auto"`` fits segment states only where the estimated noise
-#: is below this share of the outputs' spread. A larger estimate is the
-#: linear model's misfit of a strong nonlinearity at coarse sampling (0.28
-#: on a noise-free test system), which the one-step schedule handles; on
-#: the field's benchmarks the estimate is 0.001-0.016.
-_MAX_NOISE_SHARE = 0.1
-#: The noise warning suggests decimating records with more samples per
-#: period than this (measured at 1 % noise: 200 samples per period decimated
-#: to 20 took the TDL's free-run NRMSE from 0.99 to 0.12, the ISSM's from
-#: 0.50 to 0.050).
-_DECIMATE_NOISY = 40.0
-
-# BLAS thread limits are process-wide: fits running in threads of one process
-# (the threading backend, in-process dask workers, GridSearchCV with threads)
-# share one limit, set by the first to enter and restored by the last to
-# leave. A limit per thread would be lifted under the others by the first to
-# finish, and their results would then depend on timing (multi-threaded BLAS
-# rounds differently). threadpoolctl >= 3.8 lets only one thread change
-# OpenBLAS limits: the control is released after each restore, so that the
-# next fit can take it from whichever thread it runs in.
-_BLAS_LOCK = threading.Lock()
-_BLAS_USERS = 0
-_BLAS_LIMIT = None
 
 
-def _release_blas_control() -> None:
-    controller = getattr(threadpoolctl, "OpenBLASController", None)
-    release = getattr(controller, "clear_controlling_thread", None)
-    if release is not None:
-        release(force=True)
-
-
-@contextmanager
-def _single_threaded_blas():
-    """BLAS single-threaded in this process while any fit runs in it."""
-    global _BLAS_USERS, _BLAS_LIMIT
-    with _BLAS_LOCK:
-        if _BLAS_USERS == 0:
-            _release_blas_control()
-            _BLAS_LIMIT = threadpoolctl.threadpool_limits(limits=1, user_api="blas")
-        _BLAS_USERS += 1
-    try:
-        yield
-    finally:
-        with _BLAS_LOCK:
-            _BLAS_USERS -= 1
-            if _BLAS_USERS == 0:
-                _release_blas_control()
-                _BLAS_LIMIT.restore_original_limits()
-                _release_blas_control()
-                _BLAS_LIMIT = None
-
-
-class DivergenceWarning(UserWarning):
-    """A free-run simulation left the range of the training data.
-
-    The simulation is stopped at the first sample whose output is not finite
-    or exceeds a large multiple of the training output range; that sample and
-    all later ones of the sequence are returned as NaN.
-
-    Examples
-    --------
-    >>> import warnings
-    >>> from sysid_nn import DivergenceWarning
-    >>> issubclass(DivergenceWarning, UserWarning)
-    True
-    """
-
-
-@dataclass
-class _Data:
-    """Standardised sequences stacked for the kernels.
-
-    Sequence ``s`` occupies rows ``starts[s]:starts[s + 1]`` of ``Y`` and
-    ``U``; its first ``h`` rows are history (initial conditions).
-    """
-
-    Y: np.ndarray
-    U: np.ndarray
-    starts: np.ndarray
-    h: int
-    #: Leading modelled rows left out of a validation score (see ``scored``).
-    skip: int = 0
-
-    @property
-    def modelled(self) -> np.ndarray:
-        """Row indices of the modelled (non-history) rows."""
-        return np.concatenate(
-            [
-                np.arange(a + self.h, b)
-                for a, b in zip(self.starts[:-1], self.starts[1:], strict=True)
-            ]
-        )
-
-    @property
-    def scored(self) -> np.ndarray:
-        """Modelled rows that count in a validation score."""
-        return self.modelled[self.skip :]
-
-
-# --------------------------------------------------------------------------
-# input handling
-# --------------------------------------------------------------------------
-def _as_sequence_list(X, name: str):
-    """Return ``(list_of_arrays, given_as_list)``; reject mixtures."""
-    if isinstance(X, (list, tuple)):
-        if len(X) == 0:
-            raise ValueError(
-                f"{name} is an empty list; pass at least one sequence "
-                "(a 2-D array of shape (n_samples, n_features))."
-            )
-        first = X[0]
-        if np.isscalar(first) or (
-            isinstance(first, (list, tuple)) and np.isscalar(first[0])
-        ):
-            # A plain nested list is one array, as in scikit-learn.
-            return [X], False
-        return list(X), True
-    return [X], False
-
-
-@contextmanager
-def _naming_sequence(where: str, as_list: bool):
-    """Prefix an error about one sequence of a list with its place, ``X[i]``."""
-    try:
-        yield
-    except ValueError as exc:
-        if as_list:
-            raise ValueError(f"{where}: {exc}") from exc
-        raise
-
-
-def _float_array(a, name: str, where: str, as_list: bool) -> np.ndarray:
-    """``a`` as a float64 array of any dimension; errors name the sequence."""
-    with _naming_sequence(where, as_list):
-        return check_array(
-            a,
-            dtype=np.float64,
-            ensure_2d=False,
-            ensure_all_finite=False,
-            input_name=name,
-        )
-
-
-def _check_finite(a: np.ndarray, name: str, index: int | None, as_list: bool) -> None:
-    bad = ~np.isfinite(a)
-    if bad.any():
-        sample = int(np.argwhere(bad)[0][0])
-        kind = "NaN" if np.isnan(a[bad]).any() else "inf"
-        where = f"{name}[{index}]" if as_list else name
-        raise ValueError(
-            f"Input {where} contains {kind} (first at sample {sample}); "
-            "remove or interpolate non-finite values before fitting or predicting."
-        )
-
-
-class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
+class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
     """Base class of the recurrent-network regressors (not public).
 
     :class:`~sklearn.base.RegressorMixin` sits here, below this class in the
@@ -326,89 +158,13 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         for key, value in state.items():
             if isinstance(value, np.ndarray) and not value.flags.writeable:
                 state[key] = np.array(value)
+        if "coefs_" in state:
+            # Fitted: stamped with the version that fitted it (none before
+            # the stamp existed).
+            check_version(state.get("_sysid_nn_version"), f"This {type(self).__name__}")
         super().__setstate__(state)
 
     # --------------------------------------------------------- validation
-    def _validate_Xy(self, X, y=None, *, reset: bool, y_required: bool):
-        """Validate one sequence or a list of them.
-
-        Returns ``(X_list, y_list or None, given_as_list, y_was_1d)``.
-        """
-        name = type(self).__name__
-        if y_required and y is None:
-            raise ValueError(
-                f"{name} requires y to be passed, but the target y is None."
-            )
-        X_list, as_list = _as_sequence_list(X, "X")
-        if y is not None:
-            y_list, y_as_list = _as_sequence_list(y, "y")
-            if y_as_list != as_list:
-                raise ValueError(
-                    "X and y must both be arrays (one sequence) or both be lists "
-                    f"of arrays (several sequences); got X as a "
-                    f"{'list' if as_list else 'array'} and y as a "
-                    f"{'list' if y_as_list else 'array'}."
-                )
-            if len(y_list) != len(X_list):
-                raise ValueError(
-                    f"X and y must hold the same number of sequences; got "
-                    f"{len(X_list)} and {len(y_list)}."
-                )
-        Xs, ys, y_1d = [], [], None
-        for i, Xi in enumerate(X_list):
-            where = f"X[{i}]" if as_list else "X"
-            arr = _float_array(Xi, "X", where, as_list)
-            if arr.ndim == 1:
-                # scikit-learn's message prints the whole array and suggests
-                # reshape(1, -1), which would make a record one time step.
-                raise ValueError(
-                    f"{where} must be 2-D (n_samples, n_inputs); got a 1-D array of "
-                    f"shape {arr.shape}. Reshape your data: a single input is "
-                    f"one column, {where}.reshape(-1, 1)."
-                )
-            # Names as scikit-learn checks them: the first sequence of a fit
-            # sets them, every other sequence must match.
-            with _naming_sequence(where, as_list):
-                _check_feature_names(self, Xi, reset=reset and i == 0)
-            Xi = arr
-            _check_finite(Xi, "X", i, as_list)
-            Xs.append(Xi)
-            if y is not None:
-                yi = _float_array(y_list[i], "y", f"y[{i}]", as_list)
-                if yi.ndim not in (1, 2):
-                    raise ValueError(
-                        f"y must be 1-D (n_samples,) or 2-D (n_samples, n_outputs); "
-                        f"got {yi.ndim} dimensions."
-                    )
-                this_1d = yi.ndim == 1
-                if y_1d is None:
-                    y_1d = this_1d
-                yi = yi.reshape(len(yi), -1)
-                _check_finite(yi, "y", i, as_list)
-                if len(yi) != len(Xi):
-                    where = f" in sequence {i}" if as_list else ""
-                    raise ValueError(
-                        f"X and y must have the same number of samples{where}; got "
-                        f"{len(Xi)} and {len(yi)}."
-                    )
-                ys.append(yi)
-        n_features = check_same_width(Xs, "X", "features")
-        if reset:
-            self.n_features_in_ = n_features
-        elif n_features != self.n_features_in_:
-            raise ValueError(
-                f"X has {n_features} features, but {name} is expecting "
-                f"{self.n_features_in_} features as input."
-            )
-        if ys:
-            n_outputs = check_same_width(ys, "y", "outputs")
-            if not reset and n_outputs != self.n_outputs_:
-                raise ValueError(
-                    f"y has {n_outputs} outputs, but {name} was fitted with "
-                    f"{self.n_outputs_}."
-                )
-        return Xs, (ys if y is not None else None), as_list, bool(y_1d)
-
     def _lag_reach(self) -> int:
         """Past samples read to model one sample, the starting fit's included.
 
@@ -424,56 +180,6 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         shorter record leaves the starting fit without data.
         """
         return self._lag_reach() + 1
-
-    def _check_lengths(self, Xs, min_length: int, what: str = "X") -> None:
-        for i, Xi in enumerate(Xs):
-            if len(Xi) < min_length:
-                seq = f"sequence {i} of {what}" if len(Xs) > 1 else what
-                raise ValueError(
-                    f"{seq} has {len(Xi)} sample{'s' if len(Xi) != 1 else ''}; "
-                    f"{type(self).__name__} needs at least {min_length} samples "
-                    f"per sequence: with these settings it reads {min_length - 1} "
-                    "past samples to model one. Use longer records or a smaller "
-                    "structure (fewer lags or states, a shorter input_delay)."
-                )
-
-    # ------------------------------------------------------------ scaling
-    def _stack(self, Xs, ys, initial=None, initial_inputs=None) -> _Data:
-        """Standardise and stack sequences, with their history rows.
-
-        ``initial_inputs`` (validated by :meth:`_check_initial_inputs`)
-        replaces the zero excitation of the last history rows.
-        """
-        h = self._history_length()
-        Yh, Uh = self._history(len(Xs), initial)
-        if initial_inputs is not None:
-            Uh = [u.copy() for u in Uh]
-            for s, past in enumerate(initial_inputs):
-                k = min(len(past), h)
-                if k:
-                    Uh[s][h - k :] = (
-                        past[len(past) - k :] - self._x_mean
-                    ) / self._x_scale
-        n_out = self.n_outputs_
-        rows = [h + len(Xi) for Xi in Xs]
-        starts = np.concatenate([[0], np.cumsum(rows)]).astype(np.int64)
-        Y = np.zeros((starts[-1], n_out))
-        U = np.empty((starts[-1], self.n_features_in_))
-        for s, Xi in enumerate(Xs):
-            a = starts[s]
-            Y[a : a + h] = Yh[s]
-            U[a : a + h] = Uh[s]
-            U[a + h : starts[s + 1]] = (Xi - self._x_mean) / self._x_scale
-            if ys is not None:
-                Y[a + h : starts[s + 1]] = (ys[s] - self._y_mean) / self._y_scale
-        return _Data(Y=Y, U=U, starts=starts, h=h)
-
-    def _unstack(self, Yhat: np.ndarray, data: _Data, as_list: bool, y_1d: bool):
-        out = []
-        for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
-            yi = Yhat[a + data.h : b] * self._y_scale + self._y_mean
-            out.append(yi[:, 0] if y_1d else yi)
-        return out if as_list else out[0]
 
     # ------------------------------------------------------------ fitting
     def fit(self, X, y, *, X_val=None, y_val=None):
@@ -496,6 +202,40 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         self : object
             The fitted estimator.
         """
+        work = self._unfitted_copy()
+        work._fit(X, y, X_val=X_val, y_val=y_val)
+        self._adopt(work)
+        return self
+
+    def _is_fit_state(self, name: str) -> bool:
+        """Whether attribute ``name`` belongs to a fit (not a parameter).
+
+        scikit-learn's own settings (output configuration, metadata
+        requests) are not fit state.
+        """
+        return name not in self._get_param_names() and not name.startswith(
+            ("_sklearn", "_metadata_request", "__")
+        )
+
+    def _unfitted_copy(self):
+        """A shallow copy holding the parameters but no fitted state."""
+        # Not copy.copy: unpickling machinery would check a stale stamp.
+        work = object.__new__(type(self))
+        work.__dict__ = {
+            k: v for k, v in self.__dict__.items() if not self._is_fit_state(k)
+        }
+        return work
+
+    def _adopt(self, work) -> None:
+        """Take over the fitted state of ``work``, dropping the old one."""
+        stale = [k for k in self.__dict__ if self._is_fit_state(k)]
+        self.__dict__.update(work.__dict__)
+        for k in stale:
+            if k not in work.__dict__:
+                del self.__dict__[k]
+
+    def _fit(self, X, y, *, X_val=None, y_val=None):
+        """The fit proper, on an unfitted copy (see :meth:`fit`)."""
         self._validate_params()
         self._validate_structure_params()
         Xs, ys, _, y_1d = self._validate_Xy(X, y, reset=True, y_required=True)
@@ -526,126 +266,101 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         Xc, yc = np.concatenate(Xs), np.concatenate(ys)
         self._x_mean, self._x_scale = _mean_scale(Xc, "X")
         self._y_mean, self._y_scale = _mean_scale(yc, "y")
-        train = self._stack(Xs, ys)
+        train_data = self._stack(Xs, ys)
         val = self._stack(Xv, yv) if Xv is not None else None
         if val is not None:
             val.skip = skip
-        self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train.Y).max())
-        modelled = _segments(train.starts, train.h)
-        spp, advice = check_sampling(type(self).__name__, train.Y, modelled)
-        self._check_noise(train, spp, advice)
+        self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train_data.Y).max())
+        self._diagnose(train_data)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
         with _single_threaded_blas():
-            self._prepare_structure(train)
-
-            rng = check_random_state(self.random_state)
-            n_runs = self._n_restarts()
-            seeds = rng.randint(np.iinfo(np.int32).max, size=n_runs)
-            start = time.perf_counter()
-            # Successive halving (see sysid_nn._schedule): every restart runs
-            # the first stages, the better half by its score the rest.
-            n_stages = len(self._stages())
-            halving = n_runs > 1 and n_stages > HALVING_AFTER
-            restarts = [_Restart(k, seed) for k, seed in enumerate(seeds)]
-            cut = HALVING_AFTER if halving else n_stages
-            results = self._run_restarts(train, val, restarts, cut)
-            if halving:
-                kept = survivors([run.score for _, run in results])
-                going_on = [results[k][0] for k in kept]
-                done = self._run_restarts(train, val, going_on, n_stages)
-                for k, result in zip(kept, done, strict=True):
-                    results[k] = result
-            runs = [run for _, run in results]
-            best = min(range(len(runs)), key=lambda k: runs[k].score)
-            chosen = runs[best]
-            if not np.all(np.isfinite(chosen.w)):
-                raise ValueError(
-                    "The solver produced non-finite weights. Check the data for "
-                    "extreme values or reduce the learning problem (fewer lags)."
-                )
-            self.coefs_ = chosen.w
-            if not np.isfinite(chosen.score):
-                self.coefs_ = self._fallback(chosen.w, train, val)
-            self.n_iter_ = chosen.n_iter
-            self.loss_ = chosen.loss
-            self.best_validation_score_ = -chosen.val_loss if val is not None else None
-            self.restart_scores_ = np.array([-r.score for r in runs])
-            self.fit_time_ = time.perf_counter() - start
-            self._after_fit(train, val)
-            _uncertainty.fit_covariance(self, train)
+            self._prepare_structure(train_data)
+            result = train(self, train_data, val)
+            self._keep_training(result, val is not None)
+            self._after_fit(train_data, val)
+            _uncertainty.fit_covariance(self, train_data)
+        self._sysid_nn_version = version_stamp()
+        chosen = result.run
+        skipped = [i for i, stage in enumerate(chosen.history) if stage.skipped]
+        if skipped:
+            warnings.warn(
+                f"{type(self).__name__} skipped training stage"
+                f"{'s' if len(skipped) > 1 else ''} {skipped} of the chosen "
+                "restart: the free run diverged from the weights the stage "
+                "started at, so its loss was not finite. The weights come from "
+                "the stages before (skipped_stages_).",
+                ConvergenceWarning,
+                stacklevel=3,
+            )
         if not chosen.converged:
             warnings.warn(
                 f"{type(self).__name__} stopped after max_iter={self.max_iter} "
                 "iterations of its last training stage before reaching tol="
                 f"{self.tol}. Increase max_iter or loosen tol.",
                 ConvergenceWarning,
-                stacklevel=2,
+                stacklevel=3,
             )
         return self
+
+    def _keep_training(self, result, with_validation: bool) -> None:
+        """The fitted attributes of a :class:`~sysid_nn._training.Training`."""
+        chosen = result.run
+        self.coefs_ = result.w
+        self.fallback_ = result.fallback
+        self.n_iter_ = chosen.n_iter
+        self.loss_ = chosen.loss
+        self.best_validation_score_ = -chosen.val_loss if with_validation else None
+        self.restart_scores_ = np.array([-r.score for r in result.runs])
+        self.n_restarts_ = len(result.runs)
+        self.best_restart_ = result.chosen
+        self.best_stage_ = chosen.best_stage
+        self.training_history_ = [
+            [dataclasses.replace(stage) for stage in run.history] for run in result.runs
+        ]
+        self.loss_curve_ = [x for stage in chosen.history for x in stage.loss]
+        self.validation_scores_ = (
+            [-x for stage in chosen.history for x in stage.validation]
+            if with_validation
+            else None
+        )
+        self.skipped_stages_ = [
+            i for i, stage in enumerate(chosen.history) if stage.skipped
+        ]
+        self.fit_time_ = result.fit_time
 
     def _hidden_layers(self) -> tuple:
         """``hidden_layer_sizes`` as a tuple; an int is one layer (MLPRegressor)."""
         sizes = self.hidden_layer_sizes
         return tuple(sizes) if np.iterable(sizes) else (sizes,)
 
-    def _check_noise(self, train: _Data, spp: float = np.nan, advice: str = "") -> None:
-        """Estimate the output noise; warn where it swamps the fine structure.
+    def _diagnose(self, train: _Data) -> RecordDiagnosis:
+        """Estimate, decide: what the records say, and the settings it sets.
 
-        At fine sampling the dynamics show in the second difference of the
-        outputs (the TDL reads the hysteretic state from it, the ISSM's
-        one-step stage fits to it), a small fraction of the outputs. White
-        noise on the records enters that difference six-fold in variance.
-        With ``spp`` (samples per period) above ``_DECIMATE_NOISY``, the
-        warning adds ``advice`` on decimating the records. The estimate also
-        sets what depends on it: ``shooting_``, ``alpha_`` and the band edge
-        the free-state schedule low-passes the records at.
+        The estimates (:func:`sysid_nn._diagnosis.diagnose_records`) set
+        ``shooting_`` and ``alpha_`` here and the ISSM's start in its
+        ``_prepare_structure``; the noise warning comes from
+        :func:`sysid_nn._diagnosis.warn_noise`.
         """
-        var = noise_variance(train.Y, train.U, train.starts, train.h, self.input_delay)
-        self.output_noise_std_ = np.sqrt(var) * self._y_scale
-        modelled = _segments(train.starts, train.h)
-        d2 = np.concatenate([np.diff(train.Y[a:b], 2, axis=0) for a, b in modelled])
-        # The noise's share of the second difference's spread (at most 1).
-        ratio = (
-            np.sqrt(np.minimum(6.0 * var / np.maximum(d2.var(axis=0), 1e-300), 1))
-            if len(d2) >= 2
-            else np.zeros_like(var)
-        )
-        noisy = bool(np.any(ratio > _NOISY_DIFFERENCE))
-        # Read by starts that are biased under such noise (the ISSM's).
-        self._noisy_outputs = noisy
-        edge = noise_band(train.Y, train.starts, train.h, var) if noisy else 0.5
-        self._band_edge = edge
-        # Free-state shooting needs a band where the outputs clear the noise,
-        # and noise, not the broadband misfit of the linear model to a strong
-        # nonlinearity at coarse sampling, which the one-step schedule handles.
-        noise = noisy and bool(np.all(var < _MAX_NOISE_SHARE**2))
-        self.shooting_ = self._choose_shooting(noise and edge < _FULL_BAND * 0.5)
+        diagnosis = diagnose_records(type(self).__name__, train, self.input_delay)
+        self._diagnosis = diagnosis
+        self._band_edge = diagnosis.band_edge
+        self.shooting_ = self._choose_shooting(diagnosis.free_states_help)
         auto = self.alpha == "auto"
         self.alpha_ = self._auto_alpha() if auto else float(self.alpha)
-        if self._noise_sensitive() and noisy and self.shooting_ != "free":
-            k = int(np.argmax(ratio))
-            warnings.warn(
-                f"The training outputs of {type(self).__name__} carry white noise of "
-                f"about {100 * np.sqrt(var[k]):.2g} % of their spread (output {k}; "
-                "estimated from a linear one-step model's residuals, an upper "
-                "estimate: fast variation no linear model explains counts too), "
-                f"which is {100 * ratio[k]:.0f} % of the spread of their second "
-                "difference, where the dynamics show at this sampling ratio. "
-                "Networks trained on such records may lose their advantage over "
-                "the linear model: measure more outputs (velocity as well as "
-                "displacement, for the ISSM), use more records, train the TDL "
-                "with shooting='auto' or 'free', or see the user guide's "
-                "pitfalls page on measured records."
-                + (
-                    f" These records have about {spp:.0f} samples per period, "
-                    "where the second difference is a small part of the "
-                    f"output. {advice}"
-                    if spp > _DECIMATE_NOISY and advice
-                    else ""
-                ),
-                UserWarning,
-                stacklevel=3,
-            )
+        scale = self._y_scale
+        self.output_noise_std_ = np.sqrt(diagnosis.noise_variance) * scale
+        self.one_step_misfit_share_ = diagnosis.misfit_share
+        self.one_step_misfit_correlation_ = diagnosis.misfit_correlation
+        self.samples_per_period_ = diagnosis.samples_per_period
+        self.band_edge_ = diagnosis.band_edge
+        self.noise_detected_ = bool(diagnosis.noisy_outputs.any())
+        if self._noise_sensitive() and self.shooting_ != "free":
+            warn_noise(self, diagnosis, self._noise_advice())
+        return diagnosis
+
+    def _noise_advice(self) -> str:
+        """What to change about the fit when noise swamps the records."""
+        return ""
 
     def _noise_sensitive(self) -> bool:
         """Whether noise on the outputs' second difference costs this model."""
@@ -659,36 +374,6 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         <sysid_nn._schedule.stage_data>`).
         """
         return True
-
-    def _fallback(self, w: np.ndarray, train: _Data, val: _Data | None):
-        """The linear starting model when every restart's free run diverged.
-
-        Returns ``w`` unchanged when the starting model diverges too; warns
-        :class:`DivergenceWarning` either way.
-        """
-        start = self._initial_params(np.random.RandomState(0))
-        finite = all(
-            not (
-                self._run(start, data, _FREE_RUN, False, keep_state=False)[2] >= 0
-            ).any()
-            for data in (train, val)
-            if data is not None
-        )
-        warnings.warn(
-            f"Every restart of {type(self).__name__} gave a free run that diverged "
-            "on the validation (or training) records"
-            + (
-                "; the model falls back to the linear starting model."
-                if finite
-                else ", and so does the linear starting model; simulations may "
-                "return NaN."
-            )
-            + " Check the records for outliers, zero-padded or clipped stretches, "
-            "and records of very different amplitude.",
-            DivergenceWarning,
-            stacklevel=3,
-        )
-        return start if finite else w
 
     def _validate_structure_params(self) -> None:
         if not all(
@@ -743,19 +428,9 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
 
     def _stages(self) -> list[tuple[int, int]]:
         """``(segment length, iterations)`` of each training stage."""
-        if self.focus == "prediction":
-            return [(1, self.max_iter)]
-        one = max(1, round(_ONE_STEP_SHARE * self.max_iter))
-        shoot = max(1, round(_SHOOTING_SHARE * self.max_iter))
-        if self.shooting_ == "free":
-            # No stage reads measured outputs as regressors; the one-step
-            # budget goes to the longer free-state segments.
-            segs = [s for s in sorted(self.shooting_segments) if s >= _MIN_FREE_SEGMENT]
-            return [(int(s), 2 * shoot) for s in segs] + [(_FREE_RUN, self.max_iter)]
-        stages = [(1, one)]
-        stages += [(int(s), shoot) for s in sorted(self.shooting_segments)]
-        stages.append((_FREE_RUN, self.max_iter))
-        return stages
+        return training_stages(
+            self.focus, self.shooting_, self.shooting_segments, self.max_iter
+        )
 
     def _stage_objective(self, data: _Data, seg: int, mask, n_res: int, alpha):
         """The objective of a stage on segments of ``seg`` samples of ``data``."""
@@ -766,7 +441,7 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
     def _free_state_objective(self, data, seg, mask, n_res, alpha):  # pragma: no cover
         raise NotImplementedError
 
-    def _choose_shooting(self, noisy: bool) -> str:
+    def _choose_shooting(self, free_states_help: bool) -> str:
         """How shooting segments start: ``"measured"`` or ``"free"`` (fitted).
 
         Networks without free-state shooting always restart from the
@@ -778,90 +453,14 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         """The weight penalty of ``alpha="auto"``."""
         return 0.0
 
-    def _run_restarts(self, train, val, restarts, stop):
-        """Run every restart up to stage ``stop``, in parallel.
-
-        Returns ``(restart, run)`` pairs in the order of ``restarts``.
-        """
-        return Parallel(n_jobs=self.n_jobs if len(restarts) > 1 else None)(
-            delayed(self._fit_one)(train, val, restart, stop) for restart in restarts
-        )
-
     def _fit_one(self, train: _Data, val: _Data | None, restart, stop: int):
-        """One restart through the stages before ``stop``; see ``_fit_stages``."""
+        """One restart through the stages before ``stop`` (see
+        :func:`sysid_nn._training.fit_stages`); a structure may override it
+        to give a restart its own start."""
         # The linear algebra here is small (tens to hundreds of weights):
         # threaded BLAS only spins, and restarts already run in parallel.
         with _single_threaded_blas():
-            return self._fit_stages(train, val, restart, stop)
-
-    def _fit_stages(self, train, val, restart, stop):
-        """Run ``restart`` from its next stage up to stage ``stop``.
-
-        Every stage but the last sees the records :func:`_schedule.stage_data
-        <sysid_nn._schedule.stage_data>` selects. Returns ``(restart, run)``:
-        the advanced :class:`_Restart` and the :class:`_Run` it would give if
-        it ended here (best validation weights and the selection score).
-        """
-        mask = self._penalty_mask()
-        n_res = len(train.modelled) * self.n_outputs_
-        stages = self._stages()
-        final_seg = self._final_segment()
-        if restart.w is None:
-            restart.rng = np.random.RandomState(restart.seed)
-            restart.w = self._initial_params(restart.rng)
-            restart.tracker = _Tracker(self, val, final_seg, restart.w)
-        tracker, w, k = restart.tracker, restart.w, restart.k
-        tracker.est = self  # not the copy a worker process unpickled
-        for i_stage in range(restart.stage, stop):
-            seg, iters = stages[i_stage]
-            last = i_stage == len(stages) - 1
-            tracker.patience = self.n_iter_no_change if last else None
-            # Patience counts the last stage's own steps: steps of earlier
-            # stages without improvement must not end it before it starts.
-            tracker.since_best = 0
-            subset = not last and self._independent_segments()
-            data = stage_data(train, seg, restart.rng) if subset else train
-            n_data = len(data.modelled) * self.n_outputs_
-            # The penalty stays relative to the whole record.
-            alpha = self.alpha_ * (n_data / n_res)
-            objective = self._stage_objective(data, seg, mask, n_data, alpha)
-            theta = objective.start(w)
-            if not np.isfinite(objective.loss(theta)):
-                continue  # the stage diverges from here on: skip it
-            stall = None if last else _STALL_STEPS
-            theta, nit, ok = _SOLVERS[self.solver](
-                objective, theta, iters, self.tol, objective.track(tracker), stall
-            )
-            w = objective.weights(theta)
-            restart.n_iter += nit
-            if last:
-                restart.converged = ok or tracker.stopped
-            report_stage(
-                self,
-                (k, self._n_restarts()),
-                (i_stage, len(stages)),
-                f"segment {'free run' if seg == _FREE_RUN else seg}",
-                nit,
-                functools.partial(objective.loss, theta),
-                tracker.best_loss,
-            )
-        restart.w, restart.stage = w, max(stop, restart.stage)
-        if val is not None:
-            w = tracker.best_w
-            val_loss = tracker.best_loss
-        else:
-            val_loss = np.nan
-        loss = _Objective(self, train, final_seg, mask, n_res).loss(w)
-        score = val_loss if val is not None else loss
-        run = _Run(
-            w,
-            loss,
-            val_loss,
-            score if np.isfinite(score) else np.inf,
-            restart.n_iter,
-            restart.converged,
-        )
-        return restart, run
+            return fit_stages(self, train, val, restart, stop)
 
     # ----------------------------------------------------------- predicting
     def _simulate(
@@ -1052,11 +651,7 @@ default=None
         from sklearn.metrics import r2_score
 
         y_pred = self.predict(X)
-        y_true = (
-            np.concatenate(y)
-            if isinstance(y, (list, tuple)) and not np.isscalar(y[0])
-            else y
-        )
+        y_true = np.concatenate(y) if is_sequence_list(y) else y
         y_pred = np.concatenate(y_pred) if isinstance(y_pred, list) else y_pred
         if not np.all(np.isfinite(y_pred)):
             return -np.inf
@@ -1068,61 +663,6 @@ default=None
         The two strings complete the error message of :meth:`_check_initial`.
         """
         raise NotImplementedError  # pragma: no cover - abstract
-
-    def _check_initial(self, initial, n_seq: int, as_list: bool, name: str):
-        """The initial conditions of every sequence, as arrays of their shape."""
-        if initial is None:
-            return None
-        shape, count, meaning = self._initial_layout()
-        out = []
-        for i, init in enumerate(self._per_sequence(initial, n_seq, as_list, name)):
-            a = np.asarray(init, dtype=np.float64)
-            if a.size != np.prod(shape) or not np.all(np.isfinite(a)):
-                where = f"{name}[{i}]" if as_list else name
-                raise ValueError(
-                    f"{where} must hold {count} finite values ({meaning}); got "
-                    f"shape {a.shape}."
-                )
-            out.append(a.reshape(shape))
-        return out
-
-    @staticmethod
-    def _per_sequence(values, n_seq: int, as_list: bool, name: str) -> list:
-        """``values`` as a list with one entry per sequence, or a clear error."""
-        items = list(values) if as_list else [values]
-        if len(items) != n_seq:
-            raise ValueError(
-                f"{name} must hold one array per sequence; got {len(items)} for "
-                f"{n_seq} sequences."
-            )
-        return items
-
-    def _check_initial_inputs(self, initial_inputs, n_seq: int, as_list: bool):
-        """Validate the excitation before the first sample of each sequence.
-
-        One 2-D array ``(k, n_inputs)`` per sequence (1-D allowed for one
-        input), oldest first; only the last rows the lags reach are used,
-        and missing older rows are zero excitation.
-        """
-        if initial_inputs is None:
-            return None
-        pasts = self._per_sequence(initial_inputs, n_seq, as_list, "initial_inputs")
-        out = []
-        for i, past in enumerate(pasts):
-            a = np.asarray(past, dtype=np.float64)
-            if a.ndim == 1 and self.n_features_in_ == 1:
-                a = a[:, None]
-            where = f"initial_inputs[{i}]" if as_list else "initial_inputs"
-            if a.ndim != 2 or a.shape[1] != self.n_features_in_:
-                raise ValueError(
-                    f"{where} must have shape (n_past_samples, {self.n_features_in_}) "
-                    f"(the excitation before the first sample, oldest first); got "
-                    f"shape {a.shape}."
-                )
-            if not np.all(np.isfinite(a)):
-                raise ValueError(f"{where} contains NaN or inf; pass finite values.")
-            out.append(a)
-        return out
 
     def _warn_divergence(
         self,
@@ -1156,106 +696,3 @@ default=None
                 diverged[s] = bad[0]
                 block[bad[0] :] = np.nan
         self._warn_divergence(diverged, as_list, what)
-
-
-def _mean_scale(a: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and scale of every column, for standardising.
-
-    Computed on the columns divided by a power of two near their peak, which
-    is exact and safe from over- and underflow. A varying column whose
-    squared deviations overflow float64 when summed, or underflow, cannot be
-    standardised (the network and every score would be NaN, or blind to it):
-    both raise a ValueError naming ``name``. A constant column (variance
-    within the rounding error of the mean, the rule of scikit-learn's
-    ``StandardScaler``) is divided by its level where that exceeds 1, so
-    that its rounding noise stays negligible, and left unscaled otherwise.
-    """
-    peak = np.max(np.abs(a), axis=0)
-    # At most the peak, so that it is finite; |a / unit| < 2.
-    unit = np.ldexp(1.0, np.frexp(peak)[1] - 1)
-    rel = a / unit
-    rel_mean, rel_var = rel.mean(axis=0), rel.var(axis=0)
-    n, eps = len(a), np.finfo(np.float64).eps
-    constant = rel_var <= n * eps * rel_var + (n * eps * rel_mean) ** 2
-    with np.errstate(over="ignore", under="ignore"):
-        mean, scale = unit * rel_mean, unit * np.sqrt(rel_var)
-        squares = scale**2
-        overflow = ~constant & ~np.isfinite(n * squares)
-    underflow = ~constant & (squares < np.finfo(np.float64).tiny)
-    for bad, problem in (
-        (overflow, "reaches {:.3g}: its variance overflows float64"),
-        (underflow, "varies by only {:.3g}: float64 cannot square that"),
-    ):
-        if bad.any():
-            j = int(np.flatnonzero(bad)[0])
-            size = peak[j] if bad is overflow else np.ptp(a[:, j])
-            raise ValueError(
-                f"{name} cannot be standardised: column {j} "
-                f"{problem.format(size)}. Rescale {name} (e.g. express it in "
-                "other units) before fitting."
-            )
-    scale[constant] = np.maximum(1.0, peak[constant])
-    return mean, scale
-
-
-@dataclass
-class _Run:
-    w: np.ndarray
-    loss: float
-    val_loss: float
-    score: float
-    n_iter: int
-    converged: bool
-
-
-@dataclass
-class _Restart:
-    """One restart's progress through the training schedule.
-
-    ``stage`` is the next stage to run; ``rng`` draws the initial weights,
-    then each stage's subset of the records (see :mod:`sysid_nn._schedule`).
-    """
-
-    k: int
-    seed: int
-    w: np.ndarray | None = None
-    tracker: _Tracker | None = None
-    rng: np.random.RandomState | None = None
-    n_iter: int = 0
-    converged: bool = True
-    stage: int = 0
-
-
-class _Tracker:
-    """Keeps the weights with the best validation loss seen after each step."""
-
-    def __init__(self, est, val: _Data | None, seg: int, w0: np.ndarray):
-        self.est, self.val, self.seg = est, val, seg
-        self.best_w = w0.copy()
-        self.best_loss = np.inf
-        self.patience = None
-        self.since_best = 0
-        self.stopped = False
-        self.progress = _progress.StepReporter(est)
-        self(w0)
-
-    def __call__(self, w) -> None:
-        if self.val is None:
-            self.progress(np.inf)
-            return
-        Yhat, _, diverged, _ = self.est._run(
-            w, self.val, self.seg, False, keep_state=False
-        )
-        rows = self.val.scored
-        loss = np.inf
-        if not (diverged >= 0).any():
-            e = Yhat[rows] - self.val.Y[rows]
-            loss = float(np.mean(e * e))
-        self.progress(min(loss, self.best_loss))
-        if loss < self.best_loss:
-            self.best_loss, self.best_w, self.since_best = loss, w.copy(), 0
-        else:
-            self.since_best += 1
-            if self.patience is not None and self.since_best >= self.patience:
-                self.stopped = True
-                raise _EarlyStop

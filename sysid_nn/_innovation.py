@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from sysid_nn._base import _Data
+from sysid_nn._data import _Data
 from sysid_nn._solvers import _Objective, _solve_lm
 
 #: Solver iterations spent refitting the innovation weights after a

@@ -11,10 +11,16 @@ from sklearn.utils import Bunch
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from sysid_nn._base import _FREE_RUN, _Data, _RecurrentRegressorBase
+from sysid_nn._base import _RecurrentRegressorBase
+from sysid_nn._data import _FREE_RUN, _Data
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._innovation import UnstablePredictorWarning, stabilise_predictor
-from sysid_nn._issm_realisation import realise_tdl, start_tdl, validate_tdl_start
+from sysid_nn._issm_realisation import (
+    realisation_map,
+    realise_tdl,
+    start_tdl,
+    validate_tdl_start,
+)
 from sysid_nn._issm_start import (
     ARX_LAGS,
     arx_lags,
@@ -445,6 +451,12 @@ default=None
         # it fell to the linear level. The subspace start keeps it.
         return self.n_outputs_ == 1 and self.init in ("arx", "tdl")
 
+    def _noise_advice(self) -> str:
+        return (
+            "measure velocity as well as displacement, start with "
+            "init='auto' or 'subspace', "
+        )
+
     def _initial_units(self):
         rest = np.zeros(self.n_states_ - self.n_outputs_)
         return np.r_[self._y_mean, rest], np.r_[self._y_scale, rest + 1.0]
@@ -478,17 +490,15 @@ default=None
         return data, self._initial_states(data, initial), as_list
 
     # ------------------------------------------------------ starting point
-    def fit(self, X, y, *, X_val=None, y_val=None):
+    def _fit(self, X, y, *, X_val=None, y_val=None):
         # init="tdl" trains a TDL network on the same records first; it needs
         # them as given, before standardisation and stacking.
         self._fit_records = (X, y, X_val, y_val)
-        if hasattr(self, "tdl_"):
-            del self.tdl_  # from an earlier fit: it must not outlive it
         try:
-            super().fit(X, y, X_val=X_val, y_val=y_val)
+            super()._fit(X, y, X_val=X_val, y_val=y_val)
         finally:
             del self._fit_records
-        chosen = self._start_of(int(np.argmax(self.restart_scores_)))
+        chosen = self._start_of(self.best_restart_)
         self.init_, self.linear_model_ = self.__dict__.pop("_linear_starts")[chosen]
         if self.init == "tdl":
             # The training was the TDL's: report its restarts and effort.
@@ -496,8 +506,6 @@ default=None
             self.restart_scores_ = self.tdl_.restart_scores_
             self.fit_time_ += self.tdl_.fit_time_
         return self
-
-    fit.__doc__ = _RecurrentRegressorBase.fit.__doc__
 
     def _prepare_structure(self, data: _Data) -> None:
         # The linear start (_issm_start) or the realised TDL network
@@ -536,8 +544,8 @@ default=None
         # Measured (accuracy benchmark): on clean records, and with several
         # outputs on noisy ones, the ARX start did better; with one output
         # under noise it is biased and training stays at the linear level.
-        noisy = self._noisy_outputs and self.n_outputs_ == 1
-        return "subspace" if noisy and long_enough else "arx"
+        broadband = self._diagnosis.broadband_misfit and self.n_outputs_ == 1
+        return "subspace" if broadband and long_enough else "arx"
 
     def _layers(self):
         """``(weight_offset, bias_offset, n_out, n_in)`` per layer; bypass offset."""
@@ -563,6 +571,10 @@ default=None
     def _innovation_index(self) -> np.ndarray:
         n, m, p = self.n_states_, self.n_features_in_, self.n_outputs_
         return self._input_columns(np.arange(n + m, n + m + p))
+
+    def _realisation_map(self) -> np.ndarray:
+        """Jacobian of the weights by the TDL network's (``init="tdl"``)."""
+        return realisation_map(self)
 
     def _start_of(self, k: int) -> int:
         """Index in ``_linear_starts`` of restart ``k``: the extra one is last."""

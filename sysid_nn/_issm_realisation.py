@@ -8,6 +8,8 @@ network. The functions take the ISSM being fitted.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from sklearn.utils import Bunch
 
@@ -127,3 +129,20 @@ def realise_tdl(est, tdl: TDLRegressor) -> tuple[np.ndarray, Bunch]:
         w[w_off:b_off], w[b_off : b_off + n_out] = W.ravel(), b
     w[my_end:] = L.ravel()
     return w, linear_blocks(L, c, n, m)
+
+
+def realisation_map(est) -> np.ndarray:
+    """Jacobian of an ``init="tdl"`` ISSM's weights by its TDL's weights.
+
+    The realisation is affine in the TDL's weights, so unit steps give it
+    exactly.
+    """
+    tdl = copy.copy(est.tdl_)
+    w0 = tdl.coefs_
+    base, _ = realise_tdl(est, tdl)
+    G = np.empty((len(base), len(w0)))
+    for j in range(len(w0)):
+        tdl.coefs_ = w0.copy()
+        tdl.coefs_[j] += 1.0
+        G[:, j] = realise_tdl(est, tdl)[0] - base
+    return G

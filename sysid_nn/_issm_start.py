@@ -19,7 +19,7 @@ from math import ceil
 import numpy as np
 from sklearn.utils import Bunch
 
-from sysid_nn._base import _Data
+from sysid_nn._data import _Data
 from sysid_nn._subspace import HORIZON, subspace_model
 
 #: Output and input lags of the ARX model the linear part starts from, and

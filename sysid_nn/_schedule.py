@@ -1,7 +1,7 @@
 """The training schedule: which data each stage sees, which restarts go on.
 
 A simulation-focused fit runs every restart through a sequence of stages
-(:meth:`~sysid_nn._base._RecurrentRegressorBase._stages`): a one-step stage,
+(:func:`training_stages`): a one-step stage,
 multiple-shooting stages on segments of growing length, and the free run.
 Each stage minimises its least-squares objective with the chosen solver
 (:mod:`sysid_nn._solvers`); the weights with the best validation free run
@@ -24,8 +24,9 @@ information in the records rather than their length:
   training loss of the final objective) runs the remaining stages. The
   restart with the best score is chosen, as without the rule.
 
-:meth:`~sysid_nn._base._RecurrentRegressorBase.fit` drives the restarts and
-the halving; ``_fit_stages`` runs one restart through a range of stages.
+:func:`sysid_nn._training.train` drives the restarts and the halving;
+:func:`sysid_nn._training.fit_stages` runs one restart through a range of
+stages.
 """
 
 from __future__ import annotations
@@ -36,8 +37,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from sysid_nn._data import _FREE_RUN
+
 if TYPE_CHECKING:  # pragma: no cover
-    from sysid_nn._base import _Data
+    from sysid_nn._data import _Data
 
 #: Samples a stage before the last is evaluated on: about 200 fundamental
 #: periods at 150 samples per period. Records of up to twice as many samples
@@ -51,6 +54,45 @@ STAGE_SAMPLES = 30_000
 BLOCK_SAMPLES = 1_000
 #: Stages that every restart runs before the worse half stops.
 HALVING_AFTER = 2
+#: Share of ``max_iter`` spent on the one-step stage and on each multiple-
+#: shooting stage of the simulation schedule (100 and 40 of 150).
+_ONE_STEP_SHARE = 2.0 / 3.0
+_SHOOTING_SHARE = 4.0 / 15.0
+#: Free-state shooting skips segments shorter than this: with three fitted
+#: initial outputs per 20 or 50 samples the states absorb the fit.
+_MIN_FREE_SEGMENT = 100
+
+
+def training_stages(
+    focus: str, shooting: str, segments, max_iter: int
+) -> list[tuple[int, int]]:
+    """``(segment length, iterations)`` of each training stage.
+
+    ``focus="prediction"``: one one-step stage. ``"simulation"``: a
+    one-step stage, a multiple-shooting stage per length of ``segments``
+    (shortest first) and the free run; with ``shooting="free"`` (fitted
+    segment states) no stage reads measured outputs as regressors, and the
+    one-step budget goes to the segments of at least ``_MIN_FREE_SEGMENT``
+    samples.
+
+    Examples
+    --------
+    >>> training_stages("simulation", "measured", (20, 100), 150)[:3]
+    [(1, 100), (20, 40), (100, 40)]
+    >>> training_stages("prediction", "measured", (20,), 150)
+    [(1, 150)]
+    """
+    if focus == "prediction":
+        return [(1, max_iter)]
+    one = max(1, round(_ONE_STEP_SHARE * max_iter))
+    shoot = max(1, round(_SHOOTING_SHARE * max_iter))
+    if shooting == "free":
+        kept = [s for s in sorted(segments) if s >= _MIN_FREE_SEGMENT]
+        return [(int(s), 2 * shoot) for s in kept] + [(_FREE_RUN, max_iter)]
+    stages = [(1, one)]
+    stages += [(int(s), shoot) for s in sorted(segments)]
+    stages.append((_FREE_RUN, max_iter))
+    return stages
 
 
 def stage_data(data: _Data, seg: int, rng: np.random.RandomState) -> _Data:
@@ -68,7 +110,7 @@ def stage_data(data: _Data, seg: int, rng: np.random.RandomState) -> _Data:
     Examples
     --------
     >>> import numpy as np
-    >>> from sysid_nn._base import _Data
+    >>> from sysid_nn._data import _Data
     >>> def record(n):
     ...     return _Data(Y=np.zeros((n, 1)), U=np.zeros((n, 1)),
     ...                  starts=np.array([0, n]), h=3)

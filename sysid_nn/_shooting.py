@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sysid_nn._data import _FREE_RUN, _Data
 from sysid_nn._solvers import _damping
 from sysid_nn._state_estimation import _segments
 
@@ -61,8 +62,6 @@ def _segment(data, seg_len: int, n_out: int) -> _Segments:
 
     A remainder shorter than half a segment joins the segment before it.
     """
-    from sysid_nn._base import _Data  # the base imports this module
-
     h, pieces = data.h, []
     for t, b in _segments(data.starts, h):
         while t < b:
@@ -87,8 +86,6 @@ def _segment(data, seg_len: int, n_out: int) -> _Segments:
 
 def _chunk(data, lo: int, hi: int):
     """Segments ``lo:hi`` of segmented ``data`` as their own stacked data."""
-    from sysid_nn._base import _Data
-
     a, b = data.starts[lo], data.starts[hi]
     return _Data(
         Y=data.Y[a:b], U=data.U[a:b], starts=data.starts[lo : hi + 1] - a, h=data.h
@@ -146,8 +143,6 @@ class _FreeStateObjective:
             Y[first - i] = V[:, i - 1]
 
     def _chunk_run(self, w, chunk, want_jac):
-        from sysid_nn._base import _FREE_RUN
-
         Yhat, J, diverged, _ = self.est._run(w, chunk, _FREE_RUN, want_jac, False)
         rows = chunk.modelled
         return Yhat[rows], chunk.Y[rows], J, (diverged >= 0).any()

@@ -2,7 +2,8 @@
 
 A solver is called as ``solver(objective, w, iters, tol, tracker, stall)`` and
 returns ``(w, n_evaluations, converged)``; ``tracker(w)`` sees the weights
-after every accepted step and may raise :class:`_EarlyStop`. With ``stall``
+after every accepted step and may raise :class:`_EarlyStop`; a tracker
+with a ``note_loss`` method is also given the stage loss there. With ``stall``
 set, Levenberg-Marquardt also ends the stage once its cost fell by less than
 ``_STALL_IMPROVEMENT`` (relative) over the last ``stall`` accepted steps.
 
@@ -21,7 +22,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 if TYPE_CHECKING:  # pragma: no cover
-    from sysid_nn._base import _Data
+    from sysid_nn._data import _Data
 
 
 #: Relative fall of a stage's cost over its last ``stall`` accepted steps
@@ -170,6 +171,7 @@ def _solve_lm(objective, w, iters, tol, tracker, stall=None):
     A, g = objective.normal_equations(w)
     mu, nu = 1e-3, 2.0
     tracker.stopped = False
+    note_loss = getattr(tracker, "note_loss", None)
     n_eval = 0
     costs = [cost]  # after each accepted step
     try:
@@ -203,6 +205,8 @@ def _solve_lm(objective, w, iters, tol, tracker, stall=None):
                 w, r, cost = w_new, r_new, cost_new
                 A, g = objective.normal_equations(w)
                 costs.append(cost)
+                if note_loss is not None:
+                    note_loss(cost)
                 tracker(w)
                 mu *= max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
                 nu = 2.0
@@ -237,11 +241,15 @@ def _stalled(costs, stall):
 def _solve_minimize(method):
     # ``stall`` is a Levenberg-Marquardt rule; these solvers stop by ``tol``.
     def solve(objective, w, iters, tol, tracker, stall=None):
-        count = {"n": 0, "x": w}
+        count = {"n": 0, "x": w, "loss": np.inf}
+        note_loss = getattr(tracker, "note_loss", None)
 
         def callback(xk):
             count["n"] += 1
             count["x"] = np.array(xk, copy=True)
+            if note_loss is not None:
+                # The last evaluation was at xk: the accepted point.
+                note_loss(count["loss"])
             tracker(xk)
 
         tracker.stopped = False
@@ -255,6 +263,7 @@ def _solve_minimize(method):
 
         def scaled(x):
             loss, grad = objective.loss_and_grad(x)
+            count["loss"] = loss
             return loss / scale, grad / scale
 
         try:

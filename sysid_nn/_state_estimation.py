@@ -29,17 +29,34 @@ def _segments(starts: np.ndarray, h: int):
 def noise_variance(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
     """White output-noise variance of each output column, from the data alone.
 
+    The variance part of :func:`one_step_misfit`.
+
+    Returns
+    -------
+    var : ndarray of shape (n_outputs,)
+    """
+    return one_step_misfit(Y, U, starts, h, delay)[0]
+
+
+def one_step_misfit(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
+    """Misfit of a linear one-step model: its noise reading and its colour.
+
     A least-squares ARX model with ``_NOISE_LAGS`` output and input lags is
     fitted to the stacked sequences (rows ``starts[s] + h:starts[s + 1]`` of
     sequence ``s``). With white noise ``v`` on the outputs its residual is
     ``A(q) v`` plus the model error, so ``var(residual) / sum(a_i^2)`` is an
     estimate of ``var(v)`` (an upper one: the model error counts as noise).
-    At fine sampling the model error of a smooth response is far below any
-    measurement noise.
+    The lag-1 autocorrelation of the residual tells the two apart: ``A(q) v``
+    alternates from sample to sample (a negative or small correlation), the
+    error of a smooth response that the lags do not resolve varies slowly
+    (a large positive one).
 
     Returns
     -------
     var : ndarray of shape (n_outputs,)
+    correlation : ndarray of shape (n_outputs,)
+        Lag-1 autocorrelation of the residual within the sequences (0 when
+        it cannot be told).
     """
     na = nb = _NOISE_LAGS
     first = max(na, delay + nb - 1)
@@ -49,7 +66,7 @@ def noise_variance(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
     ).astype(np.int64)
     p = Y.shape[1]
     if len(rows) <= (na * p + nb * U.shape[1] + 1) * 2:
-        return np.zeros(p)
+        return np.zeros(p), np.zeros(p)
     blocks = [Y[rows - i] for i in range(1, na + 1)]
     blocks += [U[rows - delay - j] for j in range(nb)]
     design = np.hstack([*blocks, np.ones((len(rows), 1))])
@@ -59,7 +76,13 @@ def noise_variance(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
     for k in range(p):
         a = theta[k : na * p : p, k]  # own-output AR coefficients
         var[k] = resid[:, k].var() / (1.0 + float(a @ a))
-    return var
+    # Pairs of neighbouring samples of one sequence.
+    pair = np.flatnonzero(np.diff(rows) == 1)
+    centred = resid - resid.mean(axis=0)
+    num = np.sum(centred[pair] * centred[pair + 1], axis=0)
+    den = np.sum(centred * centred, axis=0)
+    correlation = np.divide(num, den, out=np.zeros(p), where=den > 0)
+    return var, correlation
 
 
 #: The outputs' band ends at the highest frequency where their spectrum

@@ -8,7 +8,8 @@ from math import comb
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from sysid_nn._base import _FREE_RUN, _Data, _RecurrentRegressorBase
+from sysid_nn._base import _RecurrentRegressorBase
+from sysid_nn._data import _FREE_RUN, _Data
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
@@ -315,7 +316,17 @@ such, default=None
         blocks += [data.U[rows - nk - i] for i in range(nb)]
         return np.hstack(blocks)
 
-    def _choose_shooting(self, noisy: bool) -> str:
+    def _noise_advice(self) -> str:
+        if self.shooting == "measured":
+            return "train with shooting='free' (or 'auto'), "
+        if self.solver != "lm" or self.focus != "simulation":
+            return (
+                "fitted segment states (shooting='auto' or 'free') need "
+                "solver='lm' and focus='simulation'; "
+            )
+        return ""
+
+    def _choose_shooting(self, free_states_help: bool) -> str:
         # Segment states are fitted by Levenberg-Marquardt's eliminated step,
         # in the simulation schedule's shooting stages.
         supported = self.solver == "lm" and self.focus == "simulation"
@@ -327,7 +338,7 @@ such, default=None
                 f"focus={self.focus!r}. Use shooting='measured' or 'auto'."
             )
         if self.shooting == "auto":
-            return "free" if noisy and supported else "measured"
+            return "free" if free_states_help and supported else "measured"
         return self.shooting
 
     def _auto_alpha(self) -> float:

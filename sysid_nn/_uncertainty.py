@@ -20,7 +20,6 @@ out.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import warnings
 from dataclasses import dataclass
@@ -222,26 +221,6 @@ def _residual_variance(normal: _Normal, n_eff, p):
     return normal.rss / max(normal.n_rows - n_eff / p, 1.0)
 
 
-def _realisation_map(est) -> np.ndarray:
-    """Jacobian of an ``init="tdl"`` ISSM's weights by its TDL's weights.
-
-    The realisation is affine in the TDL's weights, so unit steps give it
-    exactly.
-    """
-    # Imported here: the estimators' modules import this one.
-    from sysid_nn._issm_realisation import realise_tdl
-
-    tdl = copy.copy(est.tdl_)
-    w0 = tdl.coefs_
-    base, _ = realise_tdl(est, tdl)
-    G = np.empty((len(base), len(w0)))
-    for j in range(len(w0)):
-        tdl.coefs_ = w0.copy()
-        tdl.coefs_[j] += 1.0
-        G[:, j] = realise_tdl(est, tdl)[0] - base
-    return G
-
-
 def fit_covariance(est, train) -> None:
     """Store ``coefs_covariance_`` and the noise variances on a fitted ``est``.
 
@@ -272,7 +251,7 @@ def fit_covariance(est, train) -> None:
         return
     if getattr(est, "init", None) == "tdl":
         tdl = est.tdl_
-        G = _realisation_map(est)
+        G = est._realisation_map()  # the structure's (affine) map
         # The TDL's covariance already holds its own residual variance.
         cov = G @ tdl.coefs_covariance_ @ G.T
         n_eff = float(tdl.n_effective_params_)

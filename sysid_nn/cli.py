@@ -1000,6 +1000,8 @@ def _write_bands(model, records, out: Path, dt: float, level: float) -> float:
 def _load_model(path: Path):
     import joblib
 
+    from sysid_nn._exceptions import check_version
+
     try:
         bundle = joblib.load(path)
     except OSError as exc:
@@ -1008,6 +1010,7 @@ def _load_model(path: Path):
         raise _InputError(f"cannot read {path} as a saved model: {exc}") from None
     if not (hasattr(bundle, "get") and bundle.get("model") is not None):
         raise _InputError(f"{path} was not written by `sysid-nn fit --save`.")
+    check_version(bundle.get("sysid_nn_version"), f"the model in {path}")
     return bundle
 
 

@@ -17,7 +17,7 @@ from sklearn.model_selection import GridSearchCV, KFold
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from sysid_nn import ISSMRegressor
-from sysid_nn._base import _FREE_RUN
+from sysid_nn._data import _FREE_RUN
 from sysid_nn._innovation import predictor_radius, refit_innovations
 from sysid_nn._issm import UnstablePredictorWarning
 from sysid_nn._issm_realisation import realise_tdl

@@ -9,7 +9,7 @@ import pytest
 from sklearn.exceptions import ConvergenceWarning
 
 from sysid_nn import ISSMRegressor, TDLRegressor, _schedule
-from sysid_nn._base import _FREE_RUN
+from sysid_nn._data import _FREE_RUN
 
 
 def _records(n=3, length=400, seed=0):

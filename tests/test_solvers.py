@@ -10,7 +10,7 @@ import pytest
 from scipy.signal import lfilter
 
 from sysid_nn import ISSMRegressor, TDLRegressor
-from sysid_nn._base import _FREE_RUN
+from sysid_nn._data import _FREE_RUN
 from sysid_nn._innovation import RestrictedObjective
 from sysid_nn._solvers import _STALL_IMPROVEMENT, _Objective, _solve_lm
 

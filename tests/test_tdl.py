@@ -18,7 +18,7 @@ from sklearn.preprocessing import FunctionTransformer
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from sysid_nn import DivergenceWarning, TDLRegressor
-from sysid_nn._base import _FREE_RUN
+from sysid_nn._data import _FREE_RUN
 
 ROW_ORDER_CHECKS = {
     "check_methods_subset_invariance": (
@@ -205,7 +205,7 @@ def test_horizon_predictor_is_sliding():
     a, h = data.starts[1], data.h
     t = a + h + 20
     sub_starts = np.array([0, h + k])
-    from sysid_nn._base import _Data
+    from sysid_nn._data import _Data
 
     sub = _Data(
         Y=data.Y[t - k + 1 - h : t + 1].copy(),

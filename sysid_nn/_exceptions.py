@@ -1,0 +1,75 @@
+"""The warnings of the estimators, and the version stamp of fitted ones."""
+
+from __future__ import annotations
+
+import warnings
+
+__all__ = ["DivergenceWarning", "InconsistentVersionWarning"]
+
+
+class DivergenceWarning(UserWarning):
+    """A free-run simulation left the range of the training data.
+
+    The simulation is stopped at the first sample whose output is not finite
+    or exceeds a large multiple of the training output range; that sample and
+    all later ones of the sequence are returned as NaN.
+
+    Examples
+    --------
+    >>> import warnings
+    >>> from sysid_nn import DivergenceWarning
+    >>> issubclass(DivergenceWarning, UserWarning)
+    True
+    """
+
+
+class InconsistentVersionWarning(UserWarning):
+    """A fitted model was saved by another version of sysid_nn.
+
+    Raised on unpickling an estimator (or loading a model saved by
+    ``sysid-nn fit --save``) whose stamped version differs from the one
+    installed: the stored weights may be laid out or interpreted
+    differently. Refit the model with the installed version, or install the
+    version that saved it. ``saved_version`` and ``current_version`` hold
+    the two, as in scikit-learn's warning of this name.
+
+    Examples
+    --------
+    >>> from sysid_nn import InconsistentVersionWarning
+    >>> w = InconsistentVersionWarning("a model", "0.0.1", "0.1.0")
+    >>> w.saved_version, issubclass(InconsistentVersionWarning, UserWarning)
+    ('0.0.1', True)
+    """
+
+    def __init__(self, what: str, saved_version, current_version: str) -> None:
+        self.what = what
+        self.saved_version = saved_version
+        self.current_version = current_version
+
+    def __str__(self) -> str:
+        saved = (
+            "an unknown version"
+            if self.saved_version is None
+            else f"version {self.saved_version}"
+        )
+        return (
+            f"{self.what} was saved by sysid_nn {saved}; this is version "
+            f"{self.current_version}. It may load wrongly or predict differently: "
+            "refit it with this version, or install the version that saved it."
+        )
+
+
+def version_stamp() -> str:
+    """The installed version, as stamped into a fitted estimator."""
+    from sysid_nn import __version__
+
+    return __version__
+
+
+def check_version(saved, what: str, stacklevel: int = 3) -> None:
+    """Warn :class:`InconsistentVersionWarning` when ``saved`` is not ours."""
+    current = version_stamp()
+    if saved != current:
+        warnings.warn(
+            InconsistentVersionWarning(what, saved, current), stacklevel=stacklevel
+        )

@@ -1,0 +1,384 @@
+"""The training driver: restarts through the stages, halving, choice, fallback.
+
+:func:`train` runs a fit's restarts on a model structure, the estimator
+that supplies the structure hooks (``_initial_params``, ``_run``,
+``_stages``, ``_stage_objective``, ...; see
+:class:`~sysid_nn._base._RecurrentRegressorBase`):
+
+* every restart draws its starting weights and runs the stages of the
+  schedule (:mod:`sysid_nn._schedule`) with the estimator's solver
+  (:mod:`sysid_nn._solvers`), each stage on the objective the structure
+  gives it (:func:`fit_stages`); a :class:`_Tracker` keeps the weights with
+  the best validation loss seen after any step, and the histories;
+* successive halving (:func:`~sysid_nn._schedule.survivors`) lets the better
+  half of the restarts run the last stages;
+* :func:`choose_restart` picks the restart whose weights are returned;
+* :func:`fallback` replaces a choice whose free run diverged.
+
+The result is a :class:`Training`; the estimator turns it into its fitted
+attributes.
+"""
+
+from __future__ import annotations
+
+import functools
+import threading
+import time
+import warnings
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+import threadpoolctl
+from joblib import Parallel, delayed
+from sklearn.utils import check_random_state
+
+from sysid_nn import _progress
+from sysid_nn._data import _FREE_RUN, _Data
+from sysid_nn._exceptions import DivergenceWarning
+from sysid_nn._progress import report_stage
+from sysid_nn._schedule import HALVING_AFTER, stage_data, survivors
+from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
+
+#: The stages before the last end when Levenberg-Marquardt's cost stalls over
+#: this many accepted steps (see ``sysid_nn._solvers._solve_lm``), not only at
+#: their budget (measured in the user guide's training page).
+_STALL_STEPS = 10
+
+# BLAS thread limits are process-wide: fits running in threads of one process
+# (the threading backend, in-process dask workers, GridSearchCV with threads)
+# share one limit, set by the first to enter and restored by the last to
+# leave. A limit per thread would be lifted under the others by the first to
+# finish, and their results would then depend on timing (multi-threaded BLAS
+# rounds differently). threadpoolctl >= 3.8 lets only one thread change
+# OpenBLAS limits: the control is released after each restore, so that the
+# next fit can take it from whichever thread it runs in.
+_BLAS_LOCK = threading.Lock()
+_BLAS_USERS = 0
+_BLAS_LIMIT = None
+
+
+def _release_blas_control() -> None:
+    controller = getattr(threadpoolctl, "OpenBLASController", None)
+    release = getattr(controller, "clear_controlling_thread", None)
+    if release is not None:
+        release(force=True)
+
+
+@contextmanager
+def _single_threaded_blas():
+    """BLAS single-threaded in this process while any fit runs in it."""
+    global _BLAS_USERS, _BLAS_LIMIT
+    with _BLAS_LOCK:
+        if _BLAS_USERS == 0:
+            _release_blas_control()
+            _BLAS_LIMIT = threadpoolctl.threadpool_limits(limits=1, user_api="blas")
+        _BLAS_USERS += 1
+    try:
+        yield
+    finally:
+        with _BLAS_LOCK:
+            _BLAS_USERS -= 1
+            if _BLAS_USERS == 0:
+                _release_blas_control()
+                _BLAS_LIMIT.restore_original_limits()
+                _release_blas_control()
+                _BLAS_LIMIT = None
+
+
+@dataclass
+class StageHistory:
+    """What one stage of one restart did.
+
+    ``loss``: the stage objective after each accepted step (standardised
+    units, penalty included); ``validation``: the validation loss of the
+    final objective for the weights before the stage's first step and after
+    each accepted one (empty without validation data); ``skipped``: the
+    stage did not run because its starting loss was not finite.
+    """
+
+    segment: int
+    n_iter: int = 0
+    loss: list = field(default_factory=list)
+    validation: list = field(default_factory=list)
+    skipped: bool = False
+
+
+@dataclass
+class _Run:
+    w: np.ndarray
+    loss: float
+    val_loss: float
+    score: float
+    n_iter: int
+    converged: bool
+    history: list
+    best_stage: int
+
+
+@dataclass
+class _Restart:
+    """One restart's progress through the training schedule.
+
+    ``stage`` is the next stage to run; ``rng`` draws the initial weights,
+    then each stage's subset of the records (see :mod:`sysid_nn._schedule`).
+    """
+
+    k: int
+    seed: int
+    w: np.ndarray | None = None
+    tracker: _Tracker | None = None
+    rng: np.random.RandomState | None = None
+    n_iter: int = 0
+    converged: bool = True
+    stage: int = 0
+    history: list = field(default_factory=list)
+
+
+class _Tracker:
+    """Keeps the weights with the best validation loss seen after each step.
+
+    Also writes the stage histories: ``stage`` is the
+    :class:`StageHistory` the steps are booked to.
+    """
+
+    def __init__(self, est, val: _Data | None, seg: int, w0: np.ndarray):
+        self.est, self.val, self.seg = est, val, seg
+        self.best_w = w0.copy()
+        self.best_loss = np.inf
+        self.best_stage = 0
+        self.stage_index = 0
+        self.stage: StageHistory | None = None
+        self.first_loss = np.inf
+        self.patience = None
+        self.since_best = 0
+        self.stopped = False
+        self.progress = _progress.StepReporter(est)
+        self(w0)
+
+    def note_loss(self, loss: float) -> None:
+        """Book the stage objective after an accepted step (called by solvers)."""
+        if self.stage is not None:
+            self.stage.loss.append(float(loss))
+
+    def __call__(self, w) -> None:
+        if self.val is None:
+            self.progress(np.inf)
+            return
+        Yhat, _, diverged, _ = self.est._run(
+            w, self.val, self.seg, False, keep_state=False
+        )
+        rows = self.val.scored
+        loss = np.inf
+        if not (diverged >= 0).any():
+            e = Yhat[rows] - self.val.Y[rows]
+            loss = float(np.mean(e * e))
+        if self.stage is not None:
+            self.stage.validation.append(loss)
+        else:
+            self.first_loss = loss
+        self.progress(min(loss, self.best_loss))
+        if loss < self.best_loss:
+            self.best_loss, self.best_w, self.since_best = loss, w.copy(), 0
+            self.best_stage = self.stage_index
+        else:
+            self.since_best += 1
+            if self.patience is not None and self.since_best >= self.patience:
+                self.stopped = True
+                raise _EarlyStop
+
+
+@dataclass
+class Training:
+    """The outcome of :func:`train`.
+
+    ``runs`` holds every restart's result in restart order; ``chosen`` is
+    the index of the one returned; ``w`` its weights (after a fallback, the
+    fallback's); ``fallback`` says which fallback, if any, replaced them.
+    """
+
+    runs: list
+    chosen: int
+    w: np.ndarray
+    fallback: str | None
+    fit_time: float
+
+    @property
+    def run(self) -> _Run:
+        return self.runs[self.chosen]
+
+
+def train(est, train_data: _Data, val: _Data | None) -> Training:
+    """Run every restart of ``est`` through its schedule and choose one.
+
+    Successive halving (see :mod:`sysid_nn._schedule`): every restart runs
+    the first stages, the better half by its score the rest.
+    """
+    rng = check_random_state(est.random_state)
+    n_runs = est._n_restarts()
+    seeds = rng.randint(np.iinfo(np.int32).max, size=n_runs)
+    start = time.perf_counter()
+    n_stages = len(est._stages())
+    halving = n_runs > 1 and n_stages > HALVING_AFTER
+    restarts = [_Restart(k, seed) for k, seed in enumerate(seeds)]
+    cut = HALVING_AFTER if halving else n_stages
+    results = run_restarts(est, train_data, val, restarts, cut)
+    if halving:
+        kept = survivors([run.score for _, run in results])
+        going_on = [results[k][0] for k in kept]
+        done = run_restarts(est, train_data, val, going_on, n_stages)
+        for k, result in zip(kept, done, strict=True):
+            results[k] = result
+    runs = [run for _, run in results]
+    best = choose_restart(runs)
+    chosen = runs[best]
+    if not np.all(np.isfinite(chosen.w)):
+        raise ValueError(
+            "The solver produced non-finite weights. Check the data for "
+            "extreme values or reduce the learning problem (fewer lags)."
+        )
+    w, used = chosen.w, None
+    if not np.isfinite(chosen.score):
+        w, used = fallback(est, chosen.w, train_data, val)
+    return Training(runs, best, w, used, time.perf_counter() - start)
+
+
+def choose_restart(runs: list) -> int:
+    """Index of the restart whose weights ``fit`` returns.
+
+    The restart with the lowest score: the validation loss of its best
+    weights, or without validation data its training loss on the final
+    objective (a diverged one scores ``inf``). The first of equal ones.
+    """
+    return min(range(len(runs)), key=lambda k: runs[k].score)
+
+
+def fallback(est, w: np.ndarray, train_data: _Data, val: _Data | None):
+    """The linear starting model when every restart's free run diverged.
+
+    Returns ``(weights, which)``: the linear start and ``"linear_start"``,
+    or ``w`` unchanged and ``"none"`` when the linear start diverges too;
+    warns :class:`~sysid_nn.DivergenceWarning` either way.
+    """
+    start = est._initial_params(np.random.RandomState(0))
+    finite = all(
+        not (est._run(start, data, _FREE_RUN, False, keep_state=False)[2] >= 0).any()
+        for data in (train_data, val)
+        if data is not None
+    )
+    warnings.warn(
+        f"Every restart of {type(est).__name__} gave a free run that diverged "
+        "on the validation (or training) records"
+        + (
+            "; the model falls back to the linear starting model."
+            if finite
+            else ", and so does the linear starting model; simulations may return NaN."
+        )
+        + " Check the records for outliers, zero-padded or clipped stretches, "
+        "and records of very different amplitude.",
+        DivergenceWarning,
+        stacklevel=5,
+    )
+    return (start, "linear_start") if finite else (w, "none")
+
+
+def run_restarts(est, train_data, val, restarts, stop):
+    """Run every restart up to stage ``stop``, in parallel.
+
+    Returns ``(restart, run)`` pairs in the order of ``restarts``.
+    """
+    return Parallel(n_jobs=est.n_jobs if len(restarts) > 1 else None)(
+        delayed(est._fit_one)(train_data, val, restart, stop) for restart in restarts
+    )
+
+
+def fit_stages(est, train_data, val, restart, stop):
+    """Run ``restart`` from its next stage up to stage ``stop``.
+
+    Every stage but the last sees the records :func:`_schedule.stage_data
+    <sysid_nn._schedule.stage_data>` selects. Returns ``(restart, run)``:
+    the advanced :class:`_Restart` and the :class:`_Run` it would give if
+    it ended here (best validation weights and the selection score).
+    """
+    mask = est._penalty_mask()
+    n_res = len(train_data.modelled) * est.n_outputs_
+    stages = est._stages()
+    final_seg = est._final_segment()
+    if restart.w is None:
+        restart.rng = np.random.RandomState(restart.seed)
+        restart.w = est._initial_params(restart.rng)
+        restart.tracker = _Tracker(est, val, final_seg, restart.w)
+    tracker, w, k = restart.tracker, restart.w, restart.k
+    tracker.est = est  # not the copy a worker process unpickled
+    for i_stage in range(restart.stage, stop):
+        seg, iters = stages[i_stage]
+        last = i_stage == len(stages) - 1
+        record = StageHistory(int(min(seg, _FREE_RUN)))
+        restart.history.append(record)
+        tracker.stage, tracker.stage_index = record, i_stage
+        tracker.patience = est.n_iter_no_change if last else None
+        # Patience counts the last stage's own steps: steps of earlier
+        # stages without improvement must not end it before it starts.
+        tracker.since_best = 0
+        subset = not last and est._independent_segments()
+        data = stage_data(train_data, seg, restart.rng) if subset else train_data
+        n_data = len(data.modelled) * est.n_outputs_
+        # The penalty stays relative to the whole record.
+        alpha = est.alpha_ * (n_data / n_res)
+        objective = est._stage_objective(data, seg, mask, n_data, alpha)
+        theta = objective.start(w)
+        start_loss = objective.loss(theta)
+        if not np.isfinite(start_loss):
+            record.skipped = True  # the stage diverges from here on
+            continue
+        record.loss.append(float(start_loss))
+        if val is not None:
+            record.validation.append(
+                tracker.first_loss if i_stage == 0 else _last_validation(restart)
+            )
+        stall = None if last else _STALL_STEPS
+        theta, nit, ok = _SOLVERS[est.solver](
+            objective, theta, iters, est.tol, objective.track(tracker), stall
+        )
+        w = objective.weights(theta)
+        record.n_iter = nit
+        restart.n_iter += nit
+        if last:
+            restart.converged = ok or tracker.stopped
+        report_stage(
+            est,
+            (k, est._n_restarts()),
+            (i_stage, len(stages)),
+            f"segment {'free run' if seg == _FREE_RUN else seg}",
+            nit,
+            functools.partial(objective.loss, theta),
+            tracker.best_loss,
+        )
+    tracker.stage = None
+    restart.w, restart.stage = w, max(stop, restart.stage)
+    if val is not None:
+        w = tracker.best_w
+        val_loss = tracker.best_loss
+    else:
+        val_loss = np.nan
+    loss = _Objective(est, train_data, final_seg, mask, n_res).loss(w)
+    score = val_loss if val is not None else loss
+    run = _Run(
+        w,
+        loss,
+        val_loss,
+        score if np.isfinite(score) else np.inf,
+        restart.n_iter,
+        restart.converged,
+        list(restart.history),
+        tracker.best_stage if val is not None else len(stages) - 1,
+    )
+    return restart, run
+
+
+def _last_validation(restart: _Restart) -> float:
+    """The validation loss the last stage that ran ended with."""
+    for record in reversed(restart.history[:-1]):
+        if record.validation:
+            return record.validation[-1]
+    return restart.tracker.first_loss
