@@ -115,7 +115,7 @@ def _timed(fn, clock: dict, key: str):
 
 def _instrument(est, log: list):
     """Record per stage: iterations, time, and its split into evaluations."""
-    from sysid_nn import _base, _solvers
+    from sysid_nn import _solvers, _training
 
     clock = {"resid": 0.0, "n_resid": 0, "normal": 0.0, "n_normal": 0}
     clock.update(track=0.0, n_track=0)
@@ -127,7 +127,7 @@ def _instrument(est, log: list):
     _solvers._Objective.normal_equations = timed(
         "normal", _solvers._Objective.normal_equations
     )
-    _base._Tracker.__call__ = timed("track", _base._Tracker.__call__)
+    _training._Tracker.__call__ = timed("track", _training._Tracker.__call__)
     restart = {"k": -1}
     fit_stages = est._fit_stages
 
@@ -136,7 +136,7 @@ def _instrument(est, log: list):
         return fit_stages(train, val, run, stop)
 
     est._fit_stages = fit_stages_logged
-    for name, solve in list(_base._SOLVERS.items()):
+    for name, solve in list(_training._SOLVERS.items()):
 
         def logged(objective, w, iters, tol, tracker, stall=None, solve=solve):
             before = dict(clock)
@@ -156,7 +156,7 @@ def _instrument(est, log: list):
             print(json.dumps({"stage": entry}), flush=True)
             return out
 
-        _base._SOLVERS[name] = logged
+        _training._SOLVERS[name] = logged
 
 
 def _worker(kind: str, case: str, params: dict) -> dict:

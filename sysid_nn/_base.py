@@ -18,8 +18,8 @@ name:
 * the state estimator, :mod:`sysid_nn._state_estimation`: initial
   conditions fitted to a measured window (``y_init``).
 
-A fit is atomic: it works on a copy of the estimator and the fitted state
-replaces the old only when it has completed.
+A fit is atomic: when it fails or is interrupted, the estimator's
+attributes are restored to what they were before it.
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ from sysid_nn._data import (
 )
 from sysid_nn._diagnosis import RecordDiagnosis, diagnose_records, warn_noise
 from sysid_nn._estimator_docs import document_estimator
+from sysid_nn._layout import MLPLayout
 from sysid_nn._exceptions import DivergenceWarning, check_version, version_stamp
 from sysid_nn._record_checks import trim_padding
 from sysid_nn._schedule import training_stages
@@ -149,8 +150,13 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         """Standardised history rows ``(Y_hist, U_hist)`` for every sequence."""
         raise NotImplementedError
 
-    def _penalty_mask(self) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    def _layout(self) -> MLPLayout:
+        """Where each weight sits in ``coefs_`` (see :mod:`sysid_nn._layout`)."""
+        return MLPLayout(self._sizes_, self._bypass())
+
+    def _penalty_mask(self) -> np.ndarray:
+        """The weights ``alpha`` penalises."""
+        return self._layout().penalty_mask()
 
     def __setstate__(self, state):
         # joblib may restore arrays as read-only memory maps; numba compiles a
@@ -202,37 +208,23 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self : object
             The fitted estimator.
         """
-        work = self._unfitted_copy()
-        work._fit(X, y, X_val=X_val, y_val=y_val)
-        self._adopt(work)
+        saved = dict(self.__dict__)
+        # The last fit's attributes go (a refit must not keep any of them);
+        # attributes set from outside a fit stay.
+        for name in saved.get("_fit_attributes", ()):
+            del self.__dict__[name]
+        kept = set(self.__dict__)
+        try:
+            self._fit(X, y, X_val=X_val, y_val=y_val)
+        except BaseException:
+            # Atomic: a failed or interrupted fit leaves the estimator as it
+            # was, fitted or not.
+            self.__dict__.clear()
+            self.__dict__.update(saved)
+            raise
+        new = [name for name in self.__dict__ if name not in kept]
+        self._fit_attributes = (*new, "_fit_attributes")
         return self
-
-    def _is_fit_state(self, name: str) -> bool:
-        """Whether attribute ``name`` belongs to a fit (not a parameter).
-
-        scikit-learn's own settings (output configuration, metadata
-        requests) are not fit state.
-        """
-        return name not in self._get_param_names() and not name.startswith(
-            ("_sklearn", "_metadata_request", "__")
-        )
-
-    def _unfitted_copy(self):
-        """A shallow copy holding the parameters but no fitted state."""
-        # Not copy.copy: unpickling machinery would check a stale stamp.
-        work = object.__new__(type(self))
-        work.__dict__ = {
-            k: v for k, v in self.__dict__.items() if not self._is_fit_state(k)
-        }
-        return work
-
-    def _adopt(self, work) -> None:
-        """Take over the fitted state of ``work``, dropping the old one."""
-        stale = [k for k in self.__dict__ if self._is_fit_state(k)]
-        self.__dict__.update(work.__dict__)
-        for k in stale:
-            if k not in work.__dict__:
-                del self.__dict__[k]
 
     def _fit(self, X, y, *, X_val=None, y_val=None):
         """The fit proper, on an unfitted copy (see :meth:`fit`)."""
@@ -327,6 +319,38 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             i for i, stage in enumerate(chosen.history) if stage.skipped
         ]
         self.fit_time_ = result.fit_time
+
+    # ----------------------------------------------------- readable weights
+    @property
+    def layer_coefs_(self) -> list[np.ndarray]:
+        """Weight matrix of each layer, shape ``(n_in, n_out)``.
+
+        As :class:`~sklearn.neural_network.MLPRegressor`'s ``coefs_``: layer
+        ``i`` maps its input ``a`` to ``a @ layer_coefs_[i] +
+        layer_intercepts_[i]``, in standardised units (the network's inputs
+        are described under ``coefs_``). Copies of parts of ``coefs_``.
+        """
+        check_is_fitted(self, "coefs_")
+        return [W.T.copy() for W, _ in self._layout().matrices(self.coefs_)]
+
+    @property
+    def layer_intercepts_(self) -> list[np.ndarray]:
+        """Bias vector of each layer, shape ``(n_out,)`` (see ``layer_coefs_``)."""
+        check_is_fitted(self, "coefs_")
+        return [b.copy() for _, b in self._layout().matrices(self.coefs_)]
+
+    @property
+    def linear_coef_(self) -> np.ndarray | None:
+        """The linear part beside the network, shape ``(n_outputs, n_in)``.
+
+        The TDL's bypass or the ISSM's ``[A B K]`` acting on the network's
+        input (its output is added to the network's); None without one
+        (``hidden_layer_sizes=()`` is linear throughout: its only layer is
+        the linear model).
+        """
+        check_is_fitted(self, "coefs_")
+        W = self._layout().bypass_matrix(self.coefs_)
+        return None if W is None else W.copy()
 
     def _hidden_layers(self) -> tuple:
         """``hidden_layer_sizes`` as a tuple; an int is one layer (MLPRegressor)."""
@@ -460,7 +484,11 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         # The linear algebra here is small (tens to hundreds of weights):
         # threaded BLAS only spins, and restarts already run in parallel.
         with _single_threaded_blas():
-            return fit_stages(self, train, val, restart, stop)
+            return self._fit_stages(train, val, restart, stop)
+
+    def _fit_stages(self, train: _Data, val: _Data | None, restart, stop: int):
+        """See :func:`sysid_nn._training.fit_stages`."""
+        return fit_stages(self, train, val, restart, stop)
 
     # ----------------------------------------------------------- predicting
     def _simulate(
@@ -533,6 +561,15 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             where = f"y_init[{i}]" if as_list else "y_init"
             yw = np.asarray(yw, dtype=np.float64)
             yw = yw.reshape(len(yw), -1) if yw.ndim else yw.reshape(1, 1)
+            bad = ~np.isfinite(yw)
+            if bad.any():
+                kind = "NaN" if np.isnan(yw[bad]).any() else "inf"
+                raise ValueError(
+                    f"{where} contains {kind} (first at sample "
+                    f"{int(np.argwhere(bad)[0][0])}): the initial state is fitted "
+                    "to every value of the window. Shorten the window to end "
+                    "before it, or interpolate the missing values."
+                )
             if (
                 yw.shape[1] != self.n_outputs_
                 or not 1 <= len(yw) <= len(Xi)
@@ -555,7 +592,15 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
                 return (Yhat[data.h :] - target).ravel()
 
             v0 = ((self._initial_guess(yw[0]) - offset) / scale).ravel()
-            v = fit_initial_condition(residuals, v0)
+            v, success, message = fit_initial_condition(residuals, v0)
+            if not success:
+                warnings.warn(
+                    f"The initial state fitted to {where} did not converge "
+                    f"({message}); the simulation starts from the best state "
+                    "found. Check the window for outliers, or lengthen it.",
+                    ConvergenceWarning,
+                    stacklevel=4,
+                )
             out.append(offset + scale * v.reshape(offset.shape))
         return out
 

@@ -110,8 +110,49 @@ def _naming_sequence(where: str, as_list: bool):
         raise
 
 
+def _check_text_cells(a, where: str) -> None:
+    """A pandas object with a non-numeric cell: name its column and row."""
+    import pandas as pd
+
+    frame = a.to_frame() if isinstance(a, pd.Series) else a
+    for j, column in enumerate(frame.columns):
+        values = frame.iloc[:, j]
+        if pd.api.types.is_numeric_dtype(values) or pd.api.types.is_bool_dtype(
+            values
+        ):
+            continue
+        numeric = pd.to_numeric(values, errors="coerce")
+        bad = np.flatnonzero(numeric.isna().to_numpy() & values.notna().to_numpy())
+        if bad.size:
+            i = int(bad[0])
+            raise ValueError(
+                f"{where} holds a value that is not a number, {values.iloc[i]!r}, "
+                f"in column {column!r}, row {frame.index[i]!r} (position {i}). "
+                "Convert or remove it before fitting (pandas.to_numeric)."
+            )
+
+
+def _transposed_hint(shape: tuple, where: str) -> str:
+    """A hint for a record of one row and many columns: rows are samples."""
+    if len(shape) == 2 and shape[0] == 1 and shape[1] > 1:
+        return (
+            f" {where} has shape {shape}, one sample of {shape[1]} columns: is it "
+            f"transposed? Rows are time steps; pass {where}.T."
+        )
+    return ""
+
+
 def _float_array(a, name: str, where: str, as_list: bool) -> np.ndarray:
-    """``a`` as a float64 array of any dimension; errors name the sequence."""
+    """``a`` as a float64 array of 1 or 2 dimensions; errors name the sequence."""
+    if hasattr(a, "iloc") and hasattr(a, "to_numpy"):
+        _check_text_cells(a, where)
+    if np.ndim(a) > 2:
+        raise ValueError(
+            f"{where} must be 2-D (n_samples, n_columns); got a {np.ndim(a)}-D "
+            f"array of shape {np.shape(a)}. Pass several records as a list of "
+            f"2-D arrays, one per record (list({where}) if its first axis "
+            "counts the records)."
+        )
     with _naming_sequence(where, as_list):
         return check_array(
             a,
@@ -239,10 +280,11 @@ class _SequenceIO:
                 yi = yi.reshape(len(yi), -1)
                 _check_finite(yi, "y", i, as_list)
                 if len(yi) != len(Xi):
-                    where = f" in sequence {i}" if as_list else ""
+                    seq = f" in sequence {i}" if as_list else ""
                     raise ValueError(
-                        f"X and y must have the same number of samples{where}; got "
+                        f"X and y must have the same number of samples{seq}; got "
                         f"{len(Xi)} and {len(yi)}."
+                        + _transposed_hint(Xi.shape, where)
                     )
                 ys.append(yi)
         n_features = check_same_width(Xs, "X", "features")
@@ -252,6 +294,7 @@ class _SequenceIO:
             raise ValueError(
                 f"X has {n_features} features, but {name} is expecting "
                 f"{self.n_features_in_} features as input."
+                + _transposed_hint(Xs[0].shape, "X[0]" if as_list else "X")
             )
         if ys:
             n_outputs = check_same_width(ys, "y", "outputs")
@@ -272,6 +315,7 @@ class _SequenceIO:
                     f"per sequence: with these settings it reads {min_length - 1} "
                     "past samples to model one. Use longer records or a smaller "
                     "structure (fewer lags or states, a shorter input_delay)."
+                    + _transposed_hint(np.shape(Xi), what)
                 )
 
     # ------------------------------------------------------------ scaling

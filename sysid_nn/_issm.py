@@ -547,26 +547,12 @@ default=None
         broadband = self._diagnosis.broadband_misfit and self.n_outputs_ == 1
         return "subspace" if broadband and long_enough else "arx"
 
-    def _layers(self):
-        """``(weight_offset, bias_offset, n_out, n_in)`` per layer; bypass offset."""
-        sizes, layers, pos = self._sizes_, [], 0
-        for n_in, n_out in pairwise(sizes):
-            layers.append((pos, pos + n_in * n_out, int(n_out), int(n_in)))
-            pos += n_in * n_out + n_out
-        return layers, pos
-
     def _input_columns(self, cols) -> np.ndarray:
         """Indices of the weights acting on network inputs ``cols``.
 
         Those of the first layer and of the linear part, row by row.
         """
-        layers, end = self._layers()
-        w0, _, n_out, n_z = layers[0]
-        cols = np.asarray(cols)
-        idx = [w0 + j * n_z + cols for j in range(n_out)]
-        if self._bypass():
-            idx += [end + j * n_z + cols for j in range(self.n_states_)]
-        return np.concatenate(idx)
+        return self._layout().input_columns(cols)
 
     def _innovation_index(self) -> np.ndarray:
         n, m, p = self.n_states_, self.n_features_in_, self.n_outputs_
@@ -601,34 +587,22 @@ default=None
     def _initial_params(self, rng):
         if self.init == "tdl":
             return self._tdl_weights.copy()
-        sizes = self._sizes_
-        layers, end = self._layers()
-        w = np.zeros(n_params(sizes, self._bypass()))
+        layout = self._layout()
+        w = np.zeros(layout.n_params)
         lin = self.linear_model_
         L = np.hstack([lin.A, lin.B, lin.K])
-        if len(layers) == 1:
+        if len(layout.layers) == 1:
             w[: L.size] = L.ravel()
             w[L.size :] = lin.c
             return w
-        gain = 2.0 if self.activation == "logistic" else 1.0
-        for w_off, b_off, n_out, n_in in layers:
-            bound = gain * np.sqrt(6.0 / (n_in + n_out))
-            w[w_off:b_off] = rng.uniform(-bound, bound, n_out * n_in)
+        layout.draw_weights(w, rng, self.activation)
         if self.linear_part:
             # Start exactly at the linear model: network output silent.
-            w_off, b_off, n_out, _ = layers[-1]
-            w[w_off:b_off] = 0.0
-            w[b_off : b_off + n_out] = lin.c
-            w[end:] = L.ravel()
+            out = layout.layers[-1]
+            w[out.weights] = 0.0
+            w[out.biases] = lin.c
+            w[layout.bypass] = L.ravel()
         return w
-
-    def _penalty_mask(self):
-        layers, _ = self._layers()
-        mask = np.zeros(n_params(self._sizes_, self._bypass()), dtype=bool)
-        if len(layers) > 1:
-            for w_off, b_off, _, _ in layers:
-                mask[w_off:b_off] = True
-        return mask
 
     # ------------------------------------------------------------ kernels
     def _run(self, w, data, seg_len, want_jac, keep_state=True):

@@ -104,30 +104,29 @@ def realise_tdl(est, tdl: TDLRegressor) -> tuple[np.ndarray, Bunch]:
     gain = ty / sy  # the TDL's standardised output in the ISSM's units
     c[:p] = (tmy - my) / sy
     w_tdl, sizes = tdl.coefs_, tdl._sizes_
-    layers, end = tdl._layer_slices()
+    tdl_layout = tdl._layout()
+    layers = tdl_layout.layers
     if tdl._bypass():
-        bypass = w_tdl[end:].reshape(p, -1)
+        bypass = tdl_layout.bypass_matrix(w_tdl)
         L[:p] = gain[:, None] * (bypass @ T)
         c[:p] += gain * (bypass @ t0)
     w = np.zeros(n_params(est._sizes_, est._bypass()))
     if len(layers) == 1:  # the linear TDL: its map is the linear part
-        W, b = w_tdl[layers[0][0]].reshape(p, -1), w_tdl[layers[0][1]]
+        W, b = tdl_layout.matrices(w_tdl)[0]
         L[:p] = gain[:, None] * (W @ T)
         c[:p] += gain * (W @ t0 + b)
         w[: L.size], w[L.size :] = L.ravel(), c
         return w, linear_blocks(L, c, n, m)
-    mine, my_end = est._layers()
-    for i, ((ws, bs), (w_off, b_off, n_out, _)) in enumerate(
-        zip(layers, mine, strict=True)
-    ):
-        W, b = w_tdl[ws].reshape(sizes[i + 1], sizes[i]), w_tdl[bs]
+    mine = est._layout()
+    for i, (layer, own) in enumerate(zip(layers, mine.layers, strict=True)):
+        W, b = w_tdl[layer.weights].reshape(sizes[i + 1], sizes[i]), w_tdl[layer.biases]
         if i == 0:
             W, b = W @ T, b + W @ t0
         if i == len(layers) - 1:
             W = np.vstack([gain[:, None] * W, np.zeros((n - p, W.shape[1]))])
             b = c + np.concatenate([gain * b, np.zeros(n - p)])
-        w[w_off:b_off], w[b_off : b_off + n_out] = W.ravel(), b
-    w[my_end:] = L.ravel()
+        w[own.weights], w[own.biases] = W.ravel(), b
+    w[mine.bypass] = L.ravel()
     return w, linear_blocks(L, c, n, m)
 
 

@@ -152,7 +152,9 @@ def fit_initial_condition(residuals, v0: np.ndarray) -> np.ndarray:
     the (standardised) initial condition ``v``; NaN where the run diverged.
     This is an output-error fit of the few initial values (consistent under
     white output noise), solved by least squares with a finite-difference
-    Jacobian from the rest-like guess ``v0``.
+    Jacobian from the rest-like guess ``v0``. Returns ``(v, success,
+    message)``: the solver's result, whether it reports convergence, and why
+    not.
     """
     from scipy.optimize import least_squares
 
@@ -160,8 +162,8 @@ def fit_initial_condition(residuals, v0: np.ndarray) -> np.ndarray:
         r = residuals(v)
         return np.where(np.isfinite(r), r, _DIVERGED_RESIDUAL)
 
-    if len(finite(v0)) < len(v0):
-        # Fewer measured values than unknowns: Levenberg-Marquardt needs at
-        # least as many; the trust-region method finds a minimum-norm step.
-        return least_squares(finite, v0, method="trf").x
-    return least_squares(finite, v0, method="lm").x
+    # Fewer measured values than unknowns: Levenberg-Marquardt needs at
+    # least as many; the trust-region method finds a minimum-norm step.
+    method = "trf" if len(finite(v0)) < len(v0) else "lm"
+    result = least_squares(finite, v0, method=method)
+    return result.x, bool(result.success), result.message

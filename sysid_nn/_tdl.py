@@ -420,43 +420,21 @@ such, default=None
         C[:p] = lags.T
         return float(np.max(np.abs(np.linalg.eigvals(C))))
 
-    def _layer_slices(self):
-        sizes, out, p = self._sizes_, [], 0
-        for i in range(len(sizes) - 1):
-            n_w = sizes[i] * sizes[i + 1]
-            out.append((slice(p, p + n_w), slice(p + n_w, p + n_w + sizes[i + 1])))
-            p += n_w + sizes[i + 1]
-        return out, p
-
     def _initial_params(self, rng):
-        sizes = self._sizes_
-        layers, end = self._layer_slices()
-        w = np.zeros(n_params(sizes, self._bypass()))
-        for i, (ws, _) in enumerate(layers):
-            fan_in, fan_out = sizes[i], sizes[i + 1]
-            bound = np.sqrt(6.0 / (fan_in + fan_out))
-            if self.activation == "logistic":
-                bound *= 2.0
-            w[ws] = rng.uniform(-bound, bound, fan_in * fan_out)
+        layout = self._layout()
+        w = np.zeros(layout.n_params)
+        layout.draw_weights(w, rng, self.activation)
         theta_L, theta_b = self._arx[:-1].T, self._arx[-1]
-        out_w, out_b = layers[-1]
-        if len(sizes) == 2:
-            w[out_w] = theta_L.ravel()
-            w[out_b] = theta_b
+        out = layout.layers[-1]
+        if len(layout.layers) == 1:
+            w[out.weights] = theta_L.ravel()
+            w[out.biases] = theta_b
         elif self._bypass():
             # Start exactly at the ARX model: network silent, bypass = ARX.
-            w[out_w] = 0.0
-            w[out_b] = theta_b
-            w[end:] = theta_L.ravel()
+            w[out.weights] = 0.0
+            w[out.biases] = theta_b
+            w[layout.bypass] = theta_L.ravel()
         return w
-
-    def _penalty_mask(self):
-        layers, _ = self._layer_slices()
-        mask = np.zeros(n_params(self._sizes_, self._bypass()), dtype=bool)
-        if len(layers) > 1:
-            for ws, _ in layers:
-                mask[ws] = True
-        return mask
 
     def _network(self) -> tuple:
         """The fixed arguments of the kernels: layer sizes, activation,

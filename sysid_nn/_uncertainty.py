@@ -236,12 +236,26 @@ def fit_covariance(est, train) -> None:
     """
     w, p = est.coefs_, est.n_outputs_
     n_w = len(w)
+    est.bands_unavailable_ = None
     mask = est._penalty_mask().astype(np.float64)
     alpha = float(est.alpha_)
     free = _normal_matrix(est, w, train, est._final_segment())
     one = _normal_matrix(est, w, train, 1)
     nan = np.full(p, np.nan)
     if free is None or (getattr(est, "init", None) == "tdl" and one is None):
+        which = "free run" if free is None else "one-step prediction"
+        est.bands_unavailable_ = (
+            f"the final {which} of the fitted model diverged on the training "
+            "records, so its Jacobian there is undefined"
+        )
+        warnings.warn(
+            f"No confidence or prediction bands for this {type(est).__name__}: "
+            f"{est.bands_unavailable_}; return_std gives NaN. A model whose "
+            "free run leaves the training range on its own records is not "
+            "trustworthy; see the DivergenceWarning of its simulations.",
+            UserWarning,
+            stacklevel=5,
+        )
         est.coefs_covariance_ = np.full((n_w, n_w), np.nan)
         est.n_effective_params_ = np.nan
         est.noise_variance_ = nan

@@ -113,17 +113,17 @@ def test_subset_is_reproducible_from_the_random_state(small_subsets):
 
 
 def test_stages_before_the_free_run_see_the_subset(small_subsets, monkeypatch):
-    from sysid_nn import _base
+    from sysid_nn import _training
 
     Xs, ys = _records(n=4)
-    solve = _base._SOLVERS["lm"]
+    solve = _training._SOLVERS["lm"]
     seen = []
 
     def spying(objective, w, iters, tol, tracker, stall=None):
         seen.append((objective.seg, len(objective.rows)))
         return solve(objective, w, iters, tol, tracker, stall)
 
-    monkeypatch.setitem(_base._SOLVERS, "lm", spying)
+    monkeypatch.setitem(_training._SOLVERS, "lm", spying)
     _fit(_tdl(), Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
     n_train = sum(len(x) for x in Xs[:3])
     assert [s for s, _ in seen] == [1, 10, 40, _FREE_RUN]
@@ -142,10 +142,10 @@ def test_fits_on_subsets_are_reproducible(small_subsets):
 
 
 def test_penalty_stays_relative_to_the_whole_record(small_subsets, monkeypatch):
-    from sysid_nn import _base
+    from sysid_nn import _training
 
     Xs, ys = _records(n=4)
-    solve = _base._SOLVERS["lm"]
+    solve = _training._SOLVERS["lm"]
     weights = []
 
     def spying(objective, w, iters, tol, tracker, stall=None):
@@ -153,7 +153,7 @@ def test_penalty_stays_relative_to_the_whole_record(small_subsets, monkeypatch):
         weights.append(objective.alpha / n)
         return solve(objective, w, iters, tol, tracker, stall)
 
-    monkeypatch.setitem(_base._SOLVERS, "lm", spying)
+    monkeypatch.setitem(_training._SOLVERS, "lm", spying)
     _fit(_tdl(alpha=0.5), Xs, ys)
     # alpha / n_res of the whole training record in every stage.
     np.testing.assert_allclose(weights, weights[-1], rtol=1e-12)
@@ -245,16 +245,16 @@ def test_halving_without_validation_ranks_by_the_training_free_run():
 def test_issm_restarts_are_halved_too(small_subsets, monkeypatch):
     # ... but its stages see the whole records: its unmeasured states carry
     # over between segments, so a block of them is not a sum of segments.
-    from sysid_nn import _base
+    from sysid_nn import _training
 
-    solve = _base._SOLVERS["lm"]
+    solve = _training._SOLVERS["lm"]
     rows = []
 
     def spying(objective, w, iters, tol, tracker, stall=None):
         rows.append(len(objective.rows))
         return solve(objective, w, iters, tol, tracker, stall)
 
-    monkeypatch.setitem(_base._SOLVERS, "lm", spying)
+    monkeypatch.setitem(_training._SOLVERS, "lm", spying)
     Xs, ys = _records(n=4, length=400)
     # (init="arx": on noisy records "auto" adds a restart from the subspace fit.)
     model = ISSMRegressor(

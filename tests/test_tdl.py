@@ -552,20 +552,20 @@ def test_last_stage_gets_its_own_patience():
     original = model._fit_stages
 
     def spy(train, val, restart, stop):
-        from sysid_nn import _base
+        from sysid_nn import _training
 
-        solve = _base._SOLVERS["lm"]
+        solve = _training._SOLVERS["lm"]
 
         def counting(objective, w, iters, tol, tracker, stall=None):
             out = solve(objective, w, iters, tol, tracker, stall)
             stages.append((objective.seg, out[1], tracker.stopped))
             return out
 
-        _base._SOLVERS["lm"] = counting
+        _training._SOLVERS["lm"] = counting
         try:
             return original(train, val, restart, stop)
         finally:
-            _base._SOLVERS["lm"] = solve
+            _training._SOLVERS["lm"] = solve
 
     model._fit_stages = spy
     model.fit(Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
@@ -578,10 +578,10 @@ def test_last_stage_gets_its_own_patience():
 def test_stages_before_the_last_stop_when_their_cost_stalls(monkeypatch):
     # Every stage but the free run gets the stall rule; the free run stops
     # by tol, its budget or the validation patience alone.
-    from sysid_nn import _base
+    from sysid_nn import _training
 
     Xs, ys = _records(n=3, length=300, seed=5)
-    solve = _base._SOLVERS["lm"]
+    solve = _training._SOLVERS["lm"]
     stages = []
 
     def spying(objective, w, iters, tol, tracker, stall=None):
@@ -589,9 +589,9 @@ def test_stages_before_the_last_stop_when_their_cost_stalls(monkeypatch):
         stages.append((objective.seg, stall, out[1], iters))
         return out
 
-    monkeypatch.setitem(_base._SOLVERS, "lm", spying)
+    monkeypatch.setitem(_training._SOLVERS, "lm", spying)
     _small(hidden_layer_sizes=(4,), max_iter=60, n_init=1).fit(Xs, ys)
-    assert [s[1] for s in stages[:-1]] == [_base._STALL_STEPS] * (len(stages) - 1)
+    assert [s[1] for s in stages[:-1]] == [_training._STALL_STEPS] * (len(stages) - 1)
     assert stages[-1][0] == _FREE_RUN and stages[-1][1] is None
 
 
