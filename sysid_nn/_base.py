@@ -45,8 +45,8 @@ from sysid_nn._data import (
 )
 from sysid_nn._diagnosis import RecordDiagnosis, diagnose_records, warn_noise
 from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._layout import MLPLayout
 from sysid_nn._exceptions import DivergenceWarning, check_version, version_stamp
+from sysid_nn._layout import MLPLayout
 from sysid_nn._record_checks import trim_padding
 from sysid_nn._schedule import training_stages
 from sysid_nn._solvers import _Objective
@@ -375,6 +375,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self.output_noise_std_ = np.sqrt(diagnosis.noise_variance) * scale
         self.one_step_misfit_share_ = diagnosis.misfit_share
         self.one_step_misfit_correlation_ = diagnosis.misfit_correlation
+        self.one_step_misfit_explained_ = diagnosis.misfit_explained
         self.samples_per_period_ = diagnosis.samples_per_period
         self.band_edge_ = diagnosis.band_edge
         self.noise_detected_ = bool(diagnosis.noisy_outputs.any())

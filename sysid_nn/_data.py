@@ -117,9 +117,7 @@ def _check_text_cells(a, where: str) -> None:
     frame = a.to_frame() if isinstance(a, pd.Series) else a
     for j, column in enumerate(frame.columns):
         values = frame.iloc[:, j]
-        if pd.api.types.is_numeric_dtype(values) or pd.api.types.is_bool_dtype(
-            values
-        ):
+        if pd.api.types.is_numeric_dtype(values) or pd.api.types.is_bool_dtype(values):
             continue
         numeric = pd.to_numeric(values, errors="coerce")
         bad = np.flatnonzero(numeric.isna().to_numpy() & values.notna().to_numpy())
@@ -146,21 +144,23 @@ def _float_array(a, name: str, where: str, as_list: bool) -> np.ndarray:
     """``a`` as a float64 array of 1 or 2 dimensions; errors name the sequence."""
     if hasattr(a, "iloc") and hasattr(a, "to_numpy"):
         _check_text_cells(a, where)
-    if np.ndim(a) > 2:
-        raise ValueError(
-            f"{where} must be 2-D (n_samples, n_columns); got a {np.ndim(a)}-D "
-            f"array of shape {np.shape(a)}. Pass several records as a list of "
-            f"2-D arrays, one per record (list({where}) if its first axis "
-            "counts the records)."
-        )
     with _naming_sequence(where, as_list):
-        return check_array(
+        arr = check_array(
             a,
             dtype=np.float64,
             ensure_2d=False,
+            allow_nd=True,
             ensure_all_finite=False,
             input_name=name,
         )
+    if arr.ndim > 2:
+        raise ValueError(
+            f"{where} must be 2-D (n_samples, n_columns); got a {arr.ndim}-D "
+            f"array of shape {arr.shape}. Pass several records as a list of "
+            f"2-D arrays, one per record (list({where}) if its first axis "
+            "counts the records)."
+        )
+    return arr
 
 
 def _check_finite(a: np.ndarray, name: str, index: int | None, as_list: bool) -> None:
@@ -283,8 +283,7 @@ class _SequenceIO:
                     seq = f" in sequence {i}" if as_list else ""
                     raise ValueError(
                         f"X and y must have the same number of samples{seq}; got "
-                        f"{len(Xi)} and {len(yi)}."
-                        + _transposed_hint(Xi.shape, where)
+                        f"{len(Xi)} and {len(yi)}." + _transposed_hint(Xi.shape, where)
                     )
                 ys.append(yi)
         n_features = check_same_width(Xs, "X", "features")

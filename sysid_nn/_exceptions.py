@@ -33,6 +33,15 @@ class InconsistentVersionWarning(UserWarning):
     version that saved it. ``saved_version`` and ``current_version`` hold
     the two, as in scikit-learn's warning of this name.
 
+    Parameters
+    ----------
+    what : str
+        What was saved, as the message names it.
+    saved_version : str or None
+        The version stamped into it (None: saved before stamps existed).
+    current_version : str
+        The installed version.
+
     Examples
     --------
     >>> from sysid_nn import InconsistentVersionWarning

@@ -29,7 +29,7 @@ from sysid_nn._issm_start import (
     subspace_start,
 )
 from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_run
-from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
+from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]

@@ -57,6 +57,10 @@ def one_step_misfit(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
     correlation : ndarray of shape (n_outputs,)
         Lag-1 autocorrelation of the residual within the sequences (0 when
         it cannot be told).
+    explained : ndarray of shape (n_outputs,)
+        Share of the residual's variance that squares and cubes of the
+        regressors explain by least squares: large for the misfit of a
+        static non-linearity of the regressors, small for white noise.
     """
     na = nb = _NOISE_LAGS
     first = max(na, delay + nb - 1)
@@ -66,7 +70,7 @@ def one_step_misfit(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
     ).astype(np.int64)
     p = Y.shape[1]
     if len(rows) <= (na * p + nb * U.shape[1] + 1) * 2:
-        return np.zeros(p), np.zeros(p)
+        return np.zeros(p), np.zeros(p), np.zeros(p)
     blocks = [Y[rows - i] for i in range(1, na + 1)]
     blocks += [U[rows - delay - j] for j in range(nb)]
     design = np.hstack([*blocks, np.ones((len(rows), 1))])
@@ -82,7 +86,20 @@ def one_step_misfit(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
     num = np.sum(centred[pair] * centred[pair + 1], axis=0)
     den = np.sum(centred * centred, axis=0)
     correlation = np.divide(num, den, out=np.zeros(p), where=den > 0)
-    return var, correlation
+    # The share of the residual that squares and cubes of the regressors
+    # explain: a non-linearity's misfit is a function of them, white
+    # measurement noise is not.
+    lagged = design[:, :-1]
+    curved = np.hstack([design, lagged**2, lagged**3])
+    if len(rows) > 2 * curved.shape[1]:
+        beta, *_ = np.linalg.lstsq(curved, resid, rcond=None)
+        rest = resid - curved @ beta
+        explained = 1.0 - np.divide(
+            rest.var(axis=0), den / len(rows), out=np.ones(p), where=den > 0
+        )
+    else:
+        explained = np.zeros(p)
+    return var, correlation, explained
 
 
 #: The outputs' band ends at the highest frequency where their spectrum

@@ -11,7 +11,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sysid_nn._base import _RecurrentRegressorBase
 from sysid_nn._data import _FREE_RUN, _Data
 from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
+from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
 from sysid_nn._shooting import _FreeStateObjective

@@ -10,6 +10,7 @@ import warnings
 import joblib
 import numpy as np
 import pytest
+from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, KFold
 
 from sysid_nn import HystereticOscillator, ISSMRegressor, TDLRegressor
@@ -33,7 +34,10 @@ def test_restarts_and_grid_search_on_worker_processes():
         )
 
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # short budgets
+        warnings.simplefilter("ignore", ConvergenceWarning)  # short budgets
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         serial = fit_all(None)
         with (
             distributed.LocalCluster(

@@ -12,6 +12,7 @@ import ast
 import pathlib
 import pickle
 import warnings
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -172,7 +173,7 @@ def test_kept_weights_are_the_best_seen_on_validation():
     assert -model.best_validation_score_ in best_stage.validation
     # The loss curve falls within each stage (accepted steps only).
     for stage in chosen:
-        assert all(b <= a for a, b in zip(stage.loss, stage.loss[1:], strict=False))
+        assert all(b <= a for a, b in pairwise(stage.loss))
     assert len(model.loss_curve_) == sum(len(stage.loss) for stage in chosen)
 
 
@@ -184,9 +185,7 @@ def test_grid_search_picks_the_lags_of_the_system():
     X, y = X[0], y[0]
     fold = np.repeat([0, 1], 300)
     search = GridSearchCV(
-        TDLRegressor(
-            hidden_layer_sizes=(), input_lags=1, n_init=1, random_state=0
-        ),
+        TDLRegressor(hidden_layer_sizes=(), input_lags=1, n_init=1, random_state=0),
         {"output_lags": [1, 2]},
         cv=PredefinedSplit(fold),
     )
@@ -235,6 +234,29 @@ def test_clean_records_get_no_noise_warning(dt):
         assert np.all(model.one_step_misfit_correlation_ > 0.2)
 
 
+def test_noise_free_nonlinear_autoregression_gets_no_noise_warning():
+    # White excitation through a static non-linearity: a white one-step
+    # misfit of a linear model, but a function of the regressors.
+    rng = np.random.default_rng(4)
+    X, y = [], []
+    for _ in range(3):
+        u = rng.standard_normal(300)
+        out = np.zeros(300)
+        for t in range(2, 300):
+            out[t] = 1.2 * out[t - 1] - 0.5 * out[t - 2] + 0.3 * u[t - 1]
+            out[t] += 0.2 * np.tanh(2.0 * out[t - 1])
+        X.append(u[:, None])
+        y.append(out)
+    model = _small(shooting="measured", max_iter=2)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model.fit(X, y)
+    assert not [w for w in caught if "noise" in str(w.message)]
+    assert model.one_step_misfit_share_[0] > 0.02
+    assert model.one_step_misfit_explained_[0] > 0.1
+    assert not model.noise_detected_
+
+
 def test_noisy_records_are_told_apart_from_unresolved_dynamics():
     # Coarse clean records: a broadband misfit of dynamics the lags do not
     # resolve (smooth), which switches to fitted segment states silently.
@@ -251,6 +273,7 @@ def test_noisy_records_are_told_apart_from_unresolved_dynamics():
         noisy = _small(shooting="measured", max_iter=3).fit(X, y)
     assert noisy.noise_detected_
     assert noisy.one_step_misfit_correlation_[0] < 0.2
+    assert noisy.one_step_misfit_explained_[0] < 0.1
     np.testing.assert_allclose(noisy.output_noise_std_, 0.01 * np.std(y), rtol=0.3)
     assert 0 < noisy.band_edge_ < 0.5
 
@@ -272,7 +295,6 @@ def test_a_rejected_refit_leaves_the_model_as_it_was():
 
 
 def test_an_interrupted_refit_leaves_the_model_as_it_was(monkeypatch):
-    from sysid_nn import _training
 
     X, y = _oscillator_records(3, seed=7)
     model = _small()
@@ -371,7 +393,7 @@ def test_weight_views_are_the_flat_vector(model):
     coefs, intercepts = model.layer_coefs_, model.layer_intercepts_
     n_in = model._sizes_[0]
     assert coefs[0].shape[0] == n_in and coefs[-1].shape[1] == model._sizes_[-1]
-    for a, b in zip(coefs, coefs[1:], strict=False):
+    for a, b in pairwise(coefs):
         assert a.shape[1] == b.shape[0]
     flat = [np.r_[W.T.ravel(), b] for W, b in zip(coefs, intercepts, strict=True)]
     flat.append(model.linear_coef_.ravel())

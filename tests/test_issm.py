@@ -16,7 +16,7 @@ from sklearn.exceptions import ConvergenceWarning, NotFittedError
 from sklearn.model_selection import GridSearchCV, KFold
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
-from sysid_nn import ISSMRegressor
+from sysid_nn import DivergenceWarning, ISSMRegressor
 from sysid_nn._data import _FREE_RUN
 from sysid_nn._innovation import predictor_radius, refit_innovations
 from sysid_nn._issm import UnstablePredictorWarning
@@ -73,7 +73,10 @@ def _small_fitted(p, hidden=(4,), n_states=3, activation="tanh", linear_part=Tru
         random_state=0,
     )  # fmt: skip
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         est.fit(X, y)
     data = est._stack(
         [np.asarray(x) for x in X], [np.asarray(v).reshape(len(v), -1) for v in y]
@@ -265,6 +268,9 @@ def test_sklearn_compatible(estimator, check):
         # Few iterations on random data: not converging is expected here.
         warnings.simplefilter("ignore", UnstablePredictorWarning)
         warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         check(estimator)
 
 
@@ -293,7 +299,10 @@ def test_grid_search_over_structure_with_kfold_on_sequences():
         cv=KFold(3),
     )
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         search.fit(X, y)
     assert search.best_params_["n_states"] in (2, 3)
     assert np.isfinite(search.best_score_)
@@ -453,7 +462,11 @@ def test_grid_search_chooses_the_start():
         cv=KFold(3),
     )
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
+        warnings.simplefilter("ignore", DivergenceWarning)  # the arx start diverges
         search.fit(X, y)
     scores = search.cv_results_["mean_test_score"]
     assert np.all(np.isfinite(scores))
@@ -592,7 +605,10 @@ def _start_poles(init, u, y):
     model = ISSMRegressor(n_states=2, hidden_layer_sizes=(), init=init, n_init=1,
                           max_iter=1, early_stopping=False)  # fmt: skip
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         model.fit(u, y)
     return model, np.sort_complex(np.linalg.eigvals(model.linear_model_.A))
 
@@ -625,7 +641,10 @@ def test_subspace_start_has_a_stable_one_step_predictor():
     model = ISSMRegressor(hidden_layer_sizes=(), init="subspace", n_init=1,
                           max_iter=1, early_stopping=False)  # fmt: skip
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         lin = model.fit(u, y).linear_model_
     predictor = lin.A - lin.K @ np.array([[1.0, 0.0, 0.0]])
     assert np.abs(np.linalg.eigvals(predictor)).max() < 1.0
@@ -641,6 +660,9 @@ def test_default_start_follows_the_noise_on_the_records():
         with warnings.catch_warnings():
             warnings.simplefilter("error", UserWarning)  # no noise warning
             warnings.simplefilter("ignore", ConvergenceWarning)
+            warnings.filterwarnings(
+                "ignore", "The training outputs .* white noise", UserWarning
+            )
             return ISSMRegressor(n_init=1, max_iter=1, random_state=0).fit(u, y)
 
     u, y = _noisy_second_order(0.0)
@@ -654,7 +676,10 @@ def test_default_start_follows_the_noise_on_the_records():
     assert len(model.restart_scores_) == 2
     assert model.init_ == ["subspace", "arx"][np.argmax(model.restart_scores_)]
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         ref = ISSMRegressor(init=model.init_, n_init=1, max_iter=1).fit(u, y)
     np.testing.assert_array_equal(model.linear_model_.A, ref.linear_model_.A)
     # With several outputs the ARX start kept its accuracy under noise.
@@ -668,6 +693,9 @@ def test_subspace_start_needs_records_long_enough():
     with pytest.raises(ValueError, match='init="subspace" needs longer'):
         ISSMRegressor(init="subspace", n_init=1, max_iter=1).fit(u, y)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         model = ISSMRegressor(n_init=1, max_iter=1, early_stopping=False).fit(u, y)
     assert model.init_ == "arx"

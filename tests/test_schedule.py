@@ -42,7 +42,10 @@ def _tdl(**params):
 
 def _fit(model, Xs, ys, **kwargs):
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         return model.fit(Xs, ys, **kwargs)
 
 
@@ -265,6 +268,9 @@ def test_issm_restarts_are_halved_too(small_subsets, monkeypatch):
     _spy_stages(model, log)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         _fit(model, Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
     assert [first for _, first, _, _ in log] == [0, 0, _schedule.HALVING_AFTER]
     assert rows and set(rows) == {1200}

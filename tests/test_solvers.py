@@ -8,6 +8,7 @@ import warnings
 import numpy as np
 import pytest
 from scipy.signal import lfilter
+from sklearn.exceptions import ConvergenceWarning
 
 from sysid_nn import ISSMRegressor, TDLRegressor
 from sysid_nn._data import _FREE_RUN
@@ -37,7 +38,10 @@ def _fitted(kind, n_outputs=1, length=300, n_seq=2, **params):
     defaults.update(n_init=1, max_iter=1, early_stopping=False, random_state=0)
     defaults.update(params)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         est = cls(**defaults).fit(Xs, ys)
     w = est.coefs_ + 0.05 * rng.standard_normal(len(est.coefs_))
     return est, est._stack(Xs, ys), w

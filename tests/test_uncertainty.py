@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 from scipy.signal import lfilter
+from sklearn.exceptions import ConvergenceWarning
 
 from sysid_nn import ISSMRegressor, TDLRegressor
 from sysid_nn._uncertainty import _bandwidth, _bartlett
@@ -57,7 +58,10 @@ def fitted():
     u_new, y_new = nonlinear_record(200, rng)
     common = dict(n_init=1, max_iter=20, early_stopping=False, random_state=0)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         models = {
             "tdl": TDLRegressor(
                 output_lags=2, input_lags=2, hidden_layer_sizes=(3,), **common
@@ -195,7 +199,10 @@ def test_tdl_start_carries_the_tdl_covariance():
     u, y = nonlinear_record(300, rng)
     u_new, _ = nonlinear_record(150, rng)
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings(
+            "ignore", "The training outputs .* white noise", UserWarning
+        )
         model = ISSMRegressor(
             hidden_layer_sizes=(3,),
             init="tdl",
