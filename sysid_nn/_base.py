@@ -43,7 +43,7 @@ from sysid_nn._data import (
     _SequenceIO,
     is_sequence_list,
 )
-from sysid_nn._diagnosis import RecordDiagnosis, diagnose_records, warn_noise
+from sysid_nn._diagnosis import RecordDiagnosis, diagnose_records, warn_white_misfit
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._exceptions import DivergenceWarning, check_version, version_stamp
 from sysid_nn._layout import MLPLayout
@@ -362,8 +362,8 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
 
         The estimates (:func:`sysid_nn._diagnosis.diagnose_records`) set
         ``shooting_`` and ``alpha_`` here and the ISSM's start in its
-        ``_prepare_structure``; the noise warning comes from
-        :func:`sysid_nn._diagnosis.warn_noise`.
+        ``_prepare_structure``; the warning comes from
+        :func:`sysid_nn._diagnosis.warn_white_misfit`.
         """
         diagnosis = diagnose_records(type(self).__name__, train, self.input_delay)
         self._diagnosis = diagnosis
@@ -378,9 +378,9 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self.one_step_misfit_explained_ = diagnosis.misfit_explained
         self.samples_per_period_ = diagnosis.samples_per_period
         self.band_edge_ = diagnosis.band_edge
-        self.noise_detected_ = bool(diagnosis.noisy_outputs.any())
+        self.white_misfit_ = bool(diagnosis.white_misfit.any())
         if self._noise_sensitive() and self.shooting_ != "free":
-            warn_noise(self, diagnosis, self._noise_advice())
+            warn_white_misfit(self, diagnosis, self._noise_advice())
         return diagnosis
 
     def _noise_advice(self) -> str:

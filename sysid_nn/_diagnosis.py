@@ -10,8 +10,8 @@ Each "auto" setting is one sentence in three parts, each its own function:
   outputs clear the misfit, gathered in a :class:`RecordDiagnosis`;
 * **decide**: the estimators' ``_choose_shooting``, ``_auto_alpha`` and the
   ISSM's ``_chosen_start`` read the diagnosis;
-* **warn** (:func:`warn_noise`): only where the misfit looks like white
-  noise, never on records whose misfit is smooth.
+* **warn** (:func:`warn_white_misfit`): only where the misfit is white and
+  not a function of the regressors, never on records whose misfit is smooth.
 
 A **broadband misfit** (the misfit makes up more than 2 % of the spread of
 the outputs' second difference) is what the decisions switch on: at fine
@@ -44,14 +44,11 @@ _BROADBAND_MISFIT = 0.02
 #: misfit of a strong nonlinearity, not noise.
 _MAX_NOISE_SHARE = 0.1
 #: A misfit whose lag-1 autocorrelation is below this is white-like (noise);
-#: above it, smooth (dynamics the lags do not resolve). Measured on the
-#: oscillator at 10-100 samples per period: +0.33 to +0.99 on clean records,
-#: -0.56 to +0.08 at 0.1-3 % output noise.
+#: above it, smooth (dynamics the lags do not resolve); the user guide's
+#: training page gives the measurements it separates.
 _WHITE_MISFIT_CORRELATION = 0.2
 #: A misfit of which squares and cubes of the regressors explain more than
-#: this share is a non-linearity's, not noise. Measured: 0.18-0.99 on
-#: noise-free records of a non-linear autoregression under white excitation,
-#: 0.003-0.09 on the oscillator at 0.1-3 % output noise.
+#: this share is a non-linearity's, not noise (see the training page).
 _CURVED_MISFIT = 0.1
 #: The noise warning suggests decimating records with more samples per
 #: period than this.
@@ -80,8 +77,8 @@ class RecordDiagnosis:
         return bool(np.any(self.misfit_share > _BROADBAND_MISFIT))
 
     @property
-    def noisy_outputs(self) -> np.ndarray:
-        """Per output: the misfit is broadband, white-like, unexplained, small."""
+    def white_misfit(self) -> np.ndarray:
+        """Per output: the misfit is broadband, white, unexplained and small."""
         return (
             (self.misfit_share > _BROADBAND_MISFIT)
             & (self.misfit_correlation < _WHITE_MISFIT_CORRELATION)
@@ -124,27 +121,29 @@ def diagnose_records(name: str, train: _Data, delay: int) -> RecordDiagnosis:
     return RecordDiagnosis(var, share, correlation, explained, spp, advice, edge)
 
 
-def warn_noise(est, diagnosis: RecordDiagnosis, advice: str) -> None:
-    """Warn that white noise swamps the outputs' second difference.
+def warn_white_misfit(est, diagnosis: RecordDiagnosis, advice: str) -> None:
+    """Warn that a white misfit swamps the outputs' second difference.
 
-    Only for outputs whose misfit :attr:`RecordDiagnosis.noisy_outputs`
-    marks as noise; ``advice`` is the estimator's remedy.
+    Only for outputs :attr:`RecordDiagnosis.white_misfit` marks; ``advice``
+    is the estimator's remedy.
     """
-    noisy = diagnosis.noisy_outputs
-    if not noisy.any():
+    white = diagnosis.white_misfit
+    if not white.any():
         return
-    k = int(np.argmax(np.where(noisy, diagnosis.misfit_share, -1.0)))
+    k = int(np.argmax(np.where(white, diagnosis.misfit_share, -1.0)))
     spp = diagnosis.samples_per_period
     warnings.warn(
-        f"The training outputs of {type(est).__name__} carry white noise of "
-        f"about {100 * np.sqrt(diagnosis.noise_variance[k]):.2g} % of their "
-        f"spread (output {k}; estimated from a linear one-step model's "
-        "residuals, which alternate in sign from sample to sample as white "
-        f"noise does), which is {100 * diagnosis.misfit_share[k]:.0f} % of the "
-        "spread of their second difference, where the dynamics show at this "
-        "sampling ratio. Networks trained on such records may lose their "
-        f"advantage over the linear model: {advice}use more records, or see "
-        "the user guide's pitfalls page on measured records."
+        f"A linear one-step model leaves a white misfit on the training outputs "
+        f"of {type(est).__name__}: about "
+        f"{100 * np.sqrt(diagnosis.noise_variance[k]):.2g} % of their spread "
+        f"(output {k}), {100 * diagnosis.misfit_share[k]:.0f} % of the spread of "
+        "their second difference, where the dynamics show at this sampling "
+        "ratio. It is white measurement noise on the outputs, or excitation "
+        "between the samples that the records do not carry (records decimated "
+        "without an anti-aliasing filter: decimate with scipy.signal.decimate "
+        "instead). Networks trained on such records may lose their advantage "
+        f"over the linear model: {advice}use more records, or see the user "
+        "guide's pitfalls page on measured records."
         + (
             f" These records have about {spp:.0f} samples per period, where "
             f"the second difference is a small part of the output. "

@@ -79,8 +79,75 @@ best_validation_score_ : float or None
 restart_scores_ : ndarray
     Negative selection loss of every restart (of a restart dropped by the
     successive halving, at the point it stopped).
+n_restarts_ : int
+    Restarts run (the length of ``restart_scores_``).
+best_restart_ : int
+    Index of the chosen restart in ``restart_scores_``.
+best_stage_ : int
+    Training stage in which the chosen weights were seen (an index into
+    ``training_history_[best_restart_]``).
+training_history_ : list of list
+    For each restart, one record per training stage it ran: ``segment``
+    (length in samples; very large for the free run), ``n_iter``,
+    ``loss`` (the stage objective before its first step and after each
+    accepted one, standardised, penalty included), ``validation`` (the
+    validation loss at the same points, empty without validation data)
+    and ``skipped`` (the stage did not run: its starting loss was not
+    finite).
+loss_curve_ : list of float
+    The chosen restart's ``loss`` values over all its stages, in order
+    (as ``MLPRegressor.loss_curve_``; stage objectives differ from stage to
+    stage).
+validation_scores_ : list of float or None
+    The chosen restart's negative validation losses at the same points;
+    ``best_validation_score_`` is their maximum.
+skipped_stages_ : list of int
+    Stages of the chosen restart skipped because their starting loss was
+    not finite (a :class:`~sklearn.exceptions.ConvergenceWarning` says so).
+fallback_ : {None, "linear_start", "none"}
+    ``"linear_start"`` when every restart's free run diverged on the
+    validation (or training) records and the linear starting model was
+    returned; ``"none"`` when that diverged too and the chosen restart's
+    weights were kept; both warn :class:`~sysid_nn.DivergenceWarning`.
 fit_time_ : float
-    Seconds spent in training."""
+    Seconds spent in training.
+layer_coefs_ : list of ndarray
+    Weight matrix of each layer, shape ``(n_in, n_out)``, read from
+    ``coefs_`` (as ``MLPRegressor.coefs_``).
+layer_intercepts_ : list of ndarray
+    Bias vector of each layer, read from ``coefs_``.
+linear_coef_ : ndarray of shape (n_outputs, n_in) or None
+    The linear part beside the network, read from ``coefs_``.
+output_noise_std_ : ndarray of shape (n_outputs,)
+    The misfit of a linear one-step model (three output and input lags)
+    on the training records, in the user's units, corrected for the
+    model's own filtering of it: an estimate of white output noise, and an
+    upper one (what the lags do not explain counts too).
+one_step_misfit_share_ : ndarray of shape (n_outputs,)
+    That misfit as a share of the spread of the outputs' second
+    difference. Above 0.02 it is broadband, and the ``"auto"`` settings
+    react to it (see the user guide's training page).
+one_step_misfit_correlation_ : ndarray of shape (n_outputs,)
+    Lag-1 autocorrelation of the misfit: small or negative for white noise,
+    near one for dynamics the lags do not resolve.
+one_step_misfit_explained_ : ndarray of shape (n_outputs,)
+    Share of the misfit that squares and cubes of the regressors explain:
+    large for a non-linearity's misfit, small for noise.
+white_misfit_ : bool
+    Whether some output's misfit is broadband, white, not explained by the
+    regressors and below 10 % of the output's spread: white measurement
+    noise, or excitation between the samples the records do not carry
+    (decimation without an anti-aliasing filter). Only then does ``fit``
+    warn about the misfit.
+samples_per_period_ : float
+    Samples per dominant period of the training outputs (NaN when it
+    cannot be told).
+band_edge_ : float
+    Highest frequency (cycles per sample) where the outputs clear the
+    misfit; 0.5 when the misfit is not broadband.
+bands_unavailable_ : str or None
+    Why the model has no confidence and prediction bands (its final free
+    run diverged on the training records), or None; warned about."""
 _VARIANCE_ATTRIBUTES_DOC = """\
 n_effective_params_ : float
     Effective number of weights the data determine (the trace of the

@@ -85,21 +85,18 @@ class ISSMRegressor(_RecurrentRegressorBase):
     outputs as exact regressors and is biased under output noise (at 1 %
     noise on the displacement, its poles moved from 0.994 to 0.979 and a
     spurious one appeared), and training started there stays at the linear
-    model's level. With one measured output, when ``fit`` finds the records
-    noisy (the white-noise estimate ``output_noise_std_`` above 2 % of the
-    spread of the output's second difference), the default ``init="auto"``
-    starts from a subspace fit instead (N4SID type: the future outputs
-    projected along the future inputs onto past inputs and outputs, which
-    future white noise is uncorrelated with): a linear innovation model with
-    its Kalman gain ``K``, consistent under white output noise, in the same
-    state coordinates. The noise estimate cannot tell noise from what a
-    linear model misses (at coarse sampling, or on measured records), so one
-    restart more starts from the ARX fit, and validation chooses. With
-    displacement alone measured and 1 % noise the subspace start cut the
-    benchmark's free-run error from 1.00 / 0.84 to 0.20 / 0.12 with one
-    training record and from 0.045 / 0.54 to 0.022 / 0.012 with five (two
-    pool seeds). On clean records, and with several outputs measured (which
-    kept their accuracy under noise), the ARX start did better and is kept.
+    model's level. With one measured output, when a linear one-step
+    model's misfit is broadband (above 2 % of the spread of the output's
+    second difference, ``one_step_misfit_share_``), the default
+    ``init="auto"`` starts from a subspace fit instead (N4SID type: the
+    future outputs projected along the future inputs onto past inputs and
+    outputs, which future white noise is uncorrelated with): a linear
+    innovation model with its Kalman gain ``K``, consistent under white
+    output noise, in the same state coordinates. A broadband misfit is noise
+    or what the lags do not resolve (at coarse sampling, or on measured
+    records), so one restart more starts from the ARX fit, and validation
+    chooses. On clean records, and with several outputs measured, the ARX
+    start is kept (the user guide's training page gives the measurements).
 
     **Stable predictor.** Simulation-focused training barely constrains the
     weights acting on the innovations (they do not enter the free run). After
@@ -208,13 +205,6 @@ class ISSMRegressor(_RecurrentRegressorBase):
     loss_ : float
         Final training loss of the chosen restart, in standardised units.
     %(selection_attributes)s
-    output_noise_std_ : ndarray of shape (n_outputs,)
-        White measurement noise on the training outputs, estimated from the
-        records alone (residuals of a linear one-step model; an upper
-        estimate). Where it swamps the outputs' second difference, where the
-        dynamics show at fine sampling, ``init="auto"`` starts from the
-        subspace fit; with one output and ``init="arx"`` or ``"tdl"``, ``fit``
-        warns (with displacement alone the ISSM then loses its gain).
     alpha_ : float
         The weight penalty used (see ``alpha``).
     coefs_covariance_ : ndarray of shape (n_coefs, n_coefs)
@@ -440,15 +430,14 @@ default=None
 
     def _independent_segments(self) -> bool:
         # The unmeasured states carry over from one segment to the next: a
-        # block cut out of a record starts them at zero. Measured on the
-        # generated Bouc-Wen benchmark, stages on such blocks made the test
-        # error 56 % larger (6.9e-6 against 4.4e-6 m).
+        # block cut out of a record starts them at zero (worse fits; see the
+        # user guide's training page).
         return False
 
     def _noise_sensitive(self) -> bool:
-        # Measured: with displacement and velocity the ISSM kept its accuracy
-        # at 1-3 % noise; with displacement alone and the ARX (or TDL) start
-        # it fell to the linear level. The subspace start keeps it.
+        # With displacement alone and the ARX (or TDL) start, noise costs the
+        # ISSM its gain over the linear model; the subspace start, or a
+        # second measured output, keeps it (see the pitfalls page).
         return self.n_outputs_ == 1 and self.init in ("arx", "tdl")
 
     def _noise_advice(self) -> str:
@@ -541,9 +530,9 @@ default=None
             )
         if self.init != "auto":
             return self.init
-        # Measured (accuracy benchmark): on clean records, and with several
-        # outputs on noisy ones, the ARX start did better; with one output
-        # under noise it is biased and training stays at the linear level.
+        # With one output and a broadband misfit the ARX fit is biased; the
+        # subspace start is consistent under white noise (see the training
+        # page). Otherwise the ARX start.
         broadband = self._diagnosis.broadband_misfit and self.n_outputs_ == 1
         return "subspace" if broadband and long_enough else "arx"
 

@@ -45,9 +45,7 @@ if TYPE_CHECKING:  # pragma: no cover
 #: Samples a stage before the last is evaluated on: about 200 fundamental
 #: periods at 150 samples per period. Records of up to twice as many samples
 #: are used whole: there a subset would save less than half of a stage's cost
-#: for a changed objective (measured on the generated Bouc-Wen benchmark,
-#: 32 768 training samples: a 30 000-sample subset made the TDL's test error
-#: 13 % larger, by a different choice among the restarts).
+#: for a changed objective (see the user guide's training page).
 STAGE_SAMPLES = 30_000
 #: Shortest block of a stage's subset, in samples; a block is a whole number
 #: of the stage's segments.

@@ -103,10 +103,8 @@ def one_step_misfit(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
 
 
 #: The outputs' band ends at the highest frequency where their spectrum
-#: stands this many times above the white-noise floor. On the oscillator at
-#: 100 samples per period it puts the band edge at 7 / 5 Hz for 1 / 3 %
-#: noise (natural frequency 0.8 Hz, sampling 100 Hz); a fixed 8-12 Hz gave
-#: the same fits at 1 %, 20 Hz far worse ones.
+#: stands this many times above the white-noise floor (see the user guide's
+#: training page for how it was chosen).
 _BAND_MARGIN = 10.0
 #: Band edges above this share of the Nyquist frequency leave records as
 #: they are.

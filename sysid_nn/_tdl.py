@@ -19,18 +19,15 @@ from sysid_nn._state_estimation import lowpass
 
 __all__ = ["TDLRegressor"]
 
-#: The weight penalty of ``alpha="auto"`` with free segment states. Measured
-#: on the oscillator at 0.1-3 % noise, one record (P1), two pool seeds: free
-#: run median NRMSE 0.10-0.30 with it, 0.16-0.30 with 0.1, 0.13-1.33 without;
-#: with five records (P5, 1 %) 0.037 with 0.1, 0.032 without.
+#: The weight penalty of ``alpha="auto"`` with free segment states (chosen
+#: on the accuracy benchmark; see the user guide's training page).
 _NOISY_ALPHA = 0.03
 
 
 #: The TDL's linear start may not let any mode grow more than this factor
-#: over the longest training record (see ``TDLRegressor._stable_arx``).
-#: Measured: an integrating structure (EMPS, 24841 samples) has an ARX pole
-#: of 1.00003, a growth of 2.2; a cancelled pole put outside by least
-#: squares sat at 16.
+#: over the longest training record (see ``TDLRegressor._stable_arx``): an
+#: integrating structure keeps its pole near one, a cancelled pair put
+#: outside the unit circle by least squares is cut (see the training page).
 _ARX_GROWTH = 10.0
 
 
@@ -102,19 +99,21 @@ class TDLRegressor(_RecurrentRegressorBase):
         the outputs clear the noise, and every segment's initial outputs are
         fitted with the weights (multiple shooting on the segments of
         ``shooting_segments`` of at least 100 samples, then the free run).
-        ``"auto"`` chooses ``"free"`` when the estimated noise exceeds 2 % of
-        the spread of the outputs' second difference (see
-        ``output_noise_std_``) while staying below 10 % of the outputs' spread
-        (a larger estimate is a linear model's misfit, not noise), a band of
-        the spectrum clears it, and the solver is ``"lm"``. The choice is in
-        ``shooting_``.
+        ``"auto"`` chooses ``"free"`` when a linear one-step model's misfit
+        is broadband (above 2 % of the spread of the outputs' second
+        difference, ``one_step_misfit_share_``) while staying below 10 % of
+        the outputs' spread, a band of the spectrum clears it
+        (``band_edge_``), the focus is ``"simulation"`` and the solver
+        ``"lm"``: white measurement noise at fine sampling, or dynamics the
+        lags do not resolve at coarse sampling (see the user guide's
+        training page). The choice is in ``shooting_``.
     alpha : float or "auto", default="auto"
         L2 penalty on the network weights (not on biases or the bypass),
         scaled like scikit-learn's ``MLPRegressor``. ``"auto"``: none with
         the one-step schedule (``shooting_ == "measured"``), 0.03 with free
         segment states, where the output-error loss alone lets the network
-        fit one noisy record at the cost of unseen ones (measured in the user
-        guide's pitfalls page). The value used is in ``alpha_``.
+        fit one noisy record at the cost of unseen ones (see the user guide's
+        pitfalls page). The value used is in ``alpha_``.
     %(training_parameters)s
 
     Attributes
@@ -131,12 +130,6 @@ class TDLRegressor(_RecurrentRegressorBase):
         Final training loss of the chosen restart (free run for simulation
         focus), in standardised units.
     %(selection_attributes)s
-    output_noise_std_ : ndarray of shape (n_outputs,)
-        White measurement noise on the training outputs, estimated from the
-        records alone (residuals of a linear one-step model; an upper
-        estimate). Where it swamps the outputs' second difference, where the
-        dynamics show at fine sampling, ``shooting="auto"`` trains with free
-        segment states, and ``shooting="measured"`` warns.
     shooting_ : {"measured", "free"}
         How the shooting segments started (see ``shooting``).
     alpha_ : float

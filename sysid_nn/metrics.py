@@ -21,6 +21,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from sysid_nn._data import is_sequence_list
 from sysid_nn._docstrings import fill_doc
 from sysid_nn._validation import check_same_width
 
@@ -42,10 +43,8 @@ MultiOutput = Literal["uniform_average", "raw_values"]
 # Input handling shared with sysid_nn.residuals
 # ----------------------------------------------------------------------------
 def _is_sequence_list(data: Any) -> bool:
-    """Whether ``data`` is a list/tuple of sequences (not a list of scalars)."""
-    return isinstance(data, (list, tuple)) and not all(
-        np.ndim(item) == 0 for item in data
-    )
+    """Whether ``data`` is a list of sequences: the estimators' rule."""
+    return is_sequence_list(data) or (isinstance(data, (list, tuple)) and not data)
 
 
 def _as_sequence_list(
@@ -58,7 +57,8 @@ def _as_sequence_list(
     data : array-like or list of array-like
         One sequence, shape ``(n_samples,)`` or ``(n_samples, n_columns)``
         (pandas objects accepted), or a list/tuple of such sequences. A list
-        whose items are all scalars is read as one 1-D sequence.
+        whose items are all numbers is one 1-D sequence, a list of lists of
+        numbers one 2-D array (as the estimators read them).
     name : str
         Argument name used in error messages.
     allow_nan : bool, default=True

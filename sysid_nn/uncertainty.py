@@ -27,12 +27,14 @@ from scipy.stats import norm
 from sklearn.base import clone
 from sklearn.utils import check_random_state
 
+from sysid_nn._data import is_sequence_list
+
 __all__ = ["ensemble_std", "interval_coverage", "normal_interval"]
 
 
 def _as_list(values):
-    """``(list_of_arrays, given_as_list)``."""
-    if isinstance(values, (list, tuple)):
+    """``(list_of_arrays, given_as_list)``, by the estimators' list rule."""
+    if is_sequence_list(values):
         return [np.asarray(v, dtype=np.float64) for v in values], True
     return [np.asarray(values, dtype=np.float64)], False
 

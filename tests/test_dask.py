@@ -36,7 +36,7 @@ def test_restarts_and_grid_search_on_worker_processes():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)  # short budgets
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         serial = fit_all(None)
         with (

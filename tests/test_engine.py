@@ -228,9 +228,9 @@ def test_clean_records_get_no_noise_warning(dt):
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             model.fit(X, y)
-        noise = [w for w in caught if "noise" in str(w.message)]
+        noise = [w for w in caught if "misfit" in str(w.message)]
         assert noise == [], [str(w.message) for w in noise]
-        assert not model.noise_detected_
+        assert not model.white_misfit_
         assert np.all(model.one_step_misfit_correlation_ > 0.2)
 
 
@@ -251,10 +251,10 @@ def test_noise_free_nonlinear_autoregression_gets_no_noise_warning():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         model.fit(X, y)
-    assert not [w for w in caught if "noise" in str(w.message)]
+    assert not [w for w in caught if "misfit" in str(w.message)]
     assert model.one_step_misfit_share_[0] > 0.02
     assert model.one_step_misfit_explained_[0] > 0.1
-    assert not model.noise_detected_
+    assert not model.white_misfit_
 
 
 def test_noisy_records_are_told_apart_from_unresolved_dynamics():
@@ -265,13 +265,13 @@ def test_noisy_records_are_told_apart_from_unresolved_dynamics():
         warnings.simplefilter("ignore", ConvergenceWarning)
         coarse = _small(n_init=1, shooting_segments=(100,)).fit(X, y)
     assert coarse.one_step_misfit_share_[0] > 0.02
-    assert coarse.shooting_ == "free" and not coarse.noise_detected_
+    assert coarse.shooting_ == "free" and not coarse.white_misfit_
     assert coarse.samples_per_period_ == pytest.approx(20, rel=0.3)
     # 1 % white noise at 100 samples per period: noise, and said so.
     X, y = _oscillator_records(3, noise=0.01, seed=5)
-    with pytest.warns(UserWarning, match="carry white noise of about"):
+    with pytest.warns(UserWarning, match="white misfit .* white measurement noise"):
         noisy = _small(shooting="measured", max_iter=3).fit(X, y)
-    assert noisy.noise_detected_
+    assert noisy.white_misfit_
     assert noisy.one_step_misfit_correlation_[0] < 0.2
     assert noisy.one_step_misfit_explained_[0] < 0.1
     np.testing.assert_allclose(noisy.output_noise_std_, 0.01 * np.std(y), rtol=0.3)
@@ -433,3 +433,28 @@ def test_input_errors_say_what_to_do():
     window[5] = np.nan
     with pytest.raises(ValueError, match=r"y_init contains NaN \(first at sample 5\)"):
         model.simulate(X[0], y_init=window)
+
+
+# -------------------------------------------------------- one list rule
+def test_bands_and_scores_read_a_list_alike():
+    from sysid_nn._data import is_sequence_list
+    from sysid_nn.metrics import nrmse
+    from sysid_nn.uncertainty import normal_interval
+
+    numbers = [0.0, 1.0, 2.0, 3.0]  # one sequence of four samples
+    lower, _ = normal_interval(numbers, [0.1] * 4)
+    assert isinstance(lower, np.ndarray) and lower.shape == (4,)
+    assert nrmse(numbers, [0.0, 1.0, 2.0, 4.0]) > 0
+    nested = [[0.0, 1.0], [2.0, 3.0]]  # one 2-D array, as NumPy reads it
+    lower, _ = normal_interval(nested, [[0.1, 0.1], [0.1, 0.1]])
+    assert lower.shape == (2, 2)
+    scores = nrmse(nested, [[0.0, 1.5], [2.0, 3.5]], multioutput="raw_values")
+    assert scores.shape == (2,) and scores[0] == 0.0
+    records = [np.zeros(3), np.ones(4)]
+    lower, _ = normal_interval(records, [np.ones(3), np.ones(4)])
+    assert [a.shape for a in lower] == [(3,), (4,)]
+    assert [is_sequence_list(v) for v in (numbers, nested, records)] == [
+        False,
+        False,
+        True,
+    ]

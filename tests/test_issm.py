@@ -75,7 +75,7 @@ def _small_fitted(p, hidden=(4,), n_states=3, activation="tanh", linear_part=Tru
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         est.fit(X, y)
     data = est._stack(
@@ -269,7 +269,7 @@ def test_sklearn_compatible(estimator, check):
         warnings.simplefilter("ignore", UnstablePredictorWarning)
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         check(estimator)
 
@@ -301,7 +301,7 @@ def test_grid_search_over_structure_with_kfold_on_sequences():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         search.fit(X, y)
     assert search.best_params_["n_states"] in (2, 3)
@@ -464,7 +464,7 @@ def test_grid_search_chooses_the_start():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         warnings.simplefilter("ignore", DivergenceWarning)  # the arx start diverges
         search.fit(X, y)
@@ -607,7 +607,7 @@ def _start_poles(init, u, y):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         model.fit(u, y)
     return model, np.sort_complex(np.linalg.eigvals(model.linear_model_.A))
@@ -643,7 +643,7 @@ def test_subspace_start_has_a_stable_one_step_predictor():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         lin = model.fit(u, y).linear_model_
     predictor = lin.A - lin.K @ np.array([[1.0, 0.0, 0.0]])
@@ -661,7 +661,7 @@ def test_default_start_follows_the_noise_on_the_records():
             warnings.simplefilter("error", UserWarning)  # no noise warning
             warnings.simplefilter("ignore", ConvergenceWarning)
             warnings.filterwarnings(
-                "ignore", "The training outputs .* white noise", UserWarning
+                "ignore", "A linear one-step model leaves a white misfit", UserWarning
             )
             return ISSMRegressor(n_init=1, max_iter=1, random_state=0).fit(u, y)
 
@@ -678,7 +678,7 @@ def test_default_start_follows_the_noise_on_the_records():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         ref = ISSMRegressor(init=model.init_, n_init=1, max_iter=1).fit(u, y)
     np.testing.assert_array_equal(model.linear_model_.A, ref.linear_model_.A)
@@ -695,7 +695,7 @@ def test_subspace_start_needs_records_long_enough():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         model = ISSMRegressor(n_init=1, max_iter=1, early_stopping=False).fit(u, y)
     assert model.init_ == "arx"

@@ -40,7 +40,7 @@ def _fitted(kind, n_outputs=1, length=300, n_seq=2, **params):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         est = cls(**defaults).fit(Xs, ys)
     w = est.coefs_ + 0.05 * rng.standard_normal(len(est.coefs_))

@@ -60,7 +60,7 @@ def fitted():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         models = {
             "tdl": TDLRegressor(
@@ -201,7 +201,7 @@ def test_tdl_start_carries_the_tdl_covariance():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(
-            "ignore", "The training outputs .* white noise", UserWarning
+            "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         model = ISSMRegressor(
             hidden_layer_sizes=(3,),
@@ -291,7 +291,8 @@ def test_bootstrap_spread_agrees_with_the_delta_method():
     )
     assert mean.shape == delta.shape
     ratio = np.median(spread / delta)
-    assert 0.5 < ratio < 2.0
+    # 0.94 here; bands half as wide again (or two thirds as wide) fall out.
+    assert 0.7 < ratio < 1.4
     # Restarts of a linear least-squares fit land on the same minimum.
     _, same = ensemble_std(model, X, y, u_new, method="restarts", n_members=3)
     assert np.max(same) < 1e-2 * np.max(delta)
