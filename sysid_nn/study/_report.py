@@ -427,6 +427,11 @@ def _study_setup(
     ]
     warned = {n: w for n, w in data.get("fit_warnings", {}).items() if w}
     lines += [f"Warnings while fitting {n}: {'; '.join(w)}" for n, w in warned.items()]
+    if any("white misfit" in x for w in warned.values() for x in w):
+        lines.append(
+            "The study's records carry no measurement noise: a white misfit "
+            "above is the excitation between the samples of the decimated records."
+        )
     return lines
 
 
