@@ -64,7 +64,7 @@ def is_sequence_list(data) -> bool:
 
     A list or tuple is a list of sequences unless every item is a number or
     a list/tuple of numbers: a plain nested list is one array, as NumPy and
-    scikit-learn read it. An empty list counts as a (wrongly empty) list.
+    scikit-learn read it; an empty list is neither (callers reject it).
 
     Examples
     --------

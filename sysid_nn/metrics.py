@@ -44,7 +44,7 @@ MultiOutput = Literal["uniform_average", "raw_values"]
 # ----------------------------------------------------------------------------
 def _is_sequence_list(data: Any) -> bool:
     """Whether ``data`` is a list of sequences: the estimators' rule."""
-    return is_sequence_list(data) or (isinstance(data, (list, tuple)) and not data)
+    return is_sequence_list(data)
 
 
 def _as_sequence_list(

@@ -684,7 +684,7 @@ def test_default_start_follows_the_noise_on_the_records():
     np.testing.assert_array_equal(model.linear_model_.A, ref.linear_model_.A)
     # With several outputs the ARX start kept its accuracy under noise.
     assert fit(np.column_stack([y, np.roll(y, 1)])).init_ == "arx"
-    with pytest.warns(UserWarning, match="white noise"):
+    with pytest.warns(UserWarning, match="white measurement noise"):
         ISSMRegressor(init="arx", n_init=1, max_iter=1, random_state=0).fit(u, y)
 
 
