@@ -458,3 +458,20 @@ def test_bands_and_scores_read_a_list_alike():
         False,
         True,
     ]
+
+
+def test_a_saved_model_of_another_version_warns_on_load(tmp_path):
+    import joblib
+    from sklearn.utils import Bunch
+
+    from sysid_nn import __version__
+    from sysid_nn.cli import _load_model
+
+    path = tmp_path / "model.joblib"
+    joblib.dump(Bunch(model=object(), sysid_nn_version=__version__), path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InconsistentVersionWarning)
+        _load_model(path)
+    joblib.dump(Bunch(model=object(), sysid_nn_version="0.0.1"), path)
+    with pytest.warns(InconsistentVersionWarning, match="model.joblib was saved"):
+        _load_model(path)
