@@ -353,3 +353,13 @@ def test_pickles_name_the_public_module():
         dumped = pickle.dumps(obj)
         assert b"sysid_nn.study" in dumped and b"sysid_nn.study._" not in dumped
         assert pickle.loads(dumped) == obj
+
+
+def test_report_does_not_claim_noise_in_noise_free_records(study):
+    report = (study.out_dir / "report.md").read_text()
+    assert "carry white noise" not in report
+    misfit = [
+        w for ws in study.data.fit_warnings.values() for w in ws if "white misfit" in w
+    ]
+    # A white misfit on the study's records is explained for what it is.
+    assert bool(misfit) == ("carry no measurement noise" in report)
