@@ -363,9 +363,11 @@ def test_fit_progress_lines_and_closing_line(files, tmp_path, capsys):
     assert "\r" not in captured.err
     closing = captured.out.splitlines()
     assert (
-        "trained on 2 experiment(s), validated on 1 held-out experiment(s)"
-        in (closing[0])
+        "trained on 2 experiment(s), weights chosen (early stopping, restarts) on "
+        "1 experiment(s)" in closing[0]
     )
+    # The validation records chose the weights: not called held-out.
+    assert "held-out" not in captured.out and "optimistic" in closing[0]
     assert "exp2.csv" in closing[0] and "R^2" not in captured.out
     assert closing[1].strip().startswith("displacement: prediction NRMSE")
     assert _fit(files, tmp_path / "q.joblib", "--quiet") == 0
@@ -375,13 +377,14 @@ def test_fit_progress_lines_and_closing_line(files, tmp_path, capsys):
 def test_fit_single_record_scores_its_held_out_tail(files, tmp_path, capsys):
     assert _fit(files[:1], tmp_path / "m.joblib") == 0
     out = capsys.readouterr().out
-    assert "trained on 1 experiment(s), validated on the held-out last 20%" in out
+    assert "trained on 1 experiment(s), weights chosen (early stopping, " in out
+    assert "restarts) on the last 20% of" in out and "held-out" not in out
 
 
 def test_progress_survives_parallel_restarts(files, tmp_path, capsys):
     argv = ["--n-init", "2", "--n-jobs", "2", "--verbose"]
     assert _fit(files, tmp_path / "m.joblib", *argv) == 0
-    assert "validated on 1 held-out" in capsys.readouterr().out
+    assert "restarts) on 1 experiment(s)" in capsys.readouterr().out
 
 
 def test_progress_bar_on_a_terminal(monkeypatch):

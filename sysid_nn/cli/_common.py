@@ -178,7 +178,8 @@ _ABOUT = {
         "(--input) and response (--output) columns of CSV or parquet "
         "files, one experiment per file (or per --split-by group). The "
         "fitted model is saved with joblib for `sysid-nn validate`. The "
-        "closing line scores the model on held-out records.",
+        "closing line scores the model on the validation records that chose "
+        "its weights.",
     ),
     "validate": (
         "residual tests, error statistics and figures of a saved model",

@@ -173,6 +173,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     from sklearn.utils import Bunch
 
     from sysid_nn import __version__
+    from sysid_nn._compile import prepare_kernels
     from sysid_nn.study import StudyModel
 
     inputs, outputs = tuple(args.input), tuple(args.output)
@@ -202,18 +203,19 @@ def _run_fit(args: argparse.Namespace) -> int:
     else:
         X_val = y_val = None
     X_fit, y_fit = [X[j] for j in train], [y[j] for j in train]
+    prepare_kernels(show=not args.quiet)  # a first run's compiling is no fit time
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         _fit(estimator, X_fit, y_fit, X_val, y_val, sources, inputs, outputs)
         if X_val is not None:
             scores = _scores(estimator, X_val, y_val)
-            where = f"{len(X_val)} held-out experiment(s) ({', '.join(held_names)})"
+            where = f"{len(X_val)} experiment(s) ({', '.join(held_names)})"
         elif estimator.best_validation_score_ is not None:
             share = estimator.get_params()["validation_fraction"]
             scores = _scores(estimator, X, y, tail=share)
             where = (
-                f"the held-out last {share:.0%} of {records.origins[0]} (free run "
-                "from the record's start)"
+                f"the last {share:.0%} of {records.origins[0]} (free run from the "
+                "record's start)"
             )
         else:  # too short to hold anything out: say so, score what there is
             scores = _scores(estimator, X, y)
@@ -237,10 +239,11 @@ def _run_fit(args: argparse.Namespace) -> int:
     _write_atomic(args.save, dump)
     print(
         f"fitted {model.label} in {estimator.fit_time_:.1f} s: trained on "
-        f"{len(X_fit)} experiment(s), validated on {where} (dt = {dt:g} s); "
-        f"saved to {args.save}. "
+        f"{len(X_fit)} experiment(s), weights chosen (early stopping, restarts) "
+        f"on {where} (dt = {dt:g} s); saved to {args.save}. "
         + (
-            "Held-out scores:"
+            "Scores on the validation data that chose the weights (optimistic; "
+            "`sysid-nn validate` on unseen records tells more):"
             if estimator.best_validation_score_ is not None
             else "Scores on the training data:"
         )
