@@ -181,6 +181,65 @@ def test_forgotten_split_by_is_detected(frame, tmp_path, capsys):
     assert main([*argv, *TINY, "--save", str(tmp_path / "m.joblib")]) == 0
 
 
+# ------------------------------------------------------ the user's own files
+def test_semicolons_and_decimal_commas_are_read(files, tmp_path, capsys):
+    lab = tmp_path / "lab.csv"
+    pd.read_csv(files[0]).to_csv(lab, index=False, sep=";", decimal=",")
+    assert "0,02;" in lab.read_text().splitlines()[2]  # a lab export, really
+    save = tmp_path / "m.joblib"
+    assert _fit([lab], save, "--quiet") == 0  # sniffed
+    assert joblib.load(save).dt == pytest.approx(0.02)
+    argv = ["--quiet", "--overwrite", "--sep", ";", "--decimal", ","]
+    assert _fit([lab], save, *argv) == 0
+    capsys.readouterr()
+    # Told the wrong decimal mark: the error says which option reads the file.
+    assert _fit([lab], save, "--overwrite", "--decimal", ".") == 1
+    line = _error(capsys)
+    assert "lab.csv" in line and "--decimal ','" in line
+
+
+def test_datetime_time_column_suggests_dt(files, tmp_path, capsys):
+    stamped = tmp_path / "stamped.csv"
+    frame = pd.read_csv(files[0])
+    start = pd.Timestamp("2026-01-01 10:00:00")
+    frame["t"] = start + pd.to_timedelta(frame["t"], unit="s")
+    frame.to_csv(stamped, index=False)
+    assert _fit([stamped], tmp_path / "m.joblib") == 1
+    line = _error(capsys)
+    assert "dates and times" in line and "--time-column none --dt 0.02" in line
+
+
+def test_descending_time_column_is_not_taken_for_experiments(files, tmp_path, capsys):
+    backwards = tmp_path / "backwards.csv"
+    pd.read_csv(files[0]).iloc[::-1].to_csv(backwards, index=False)
+    assert _fit([backwards], tmp_path / "m.joblib") == 1
+    line = _error(capsys)
+    assert "runs backwards" in line and "sort the file by time" in line
+    assert "--split-by" not in line
+
+
+def test_duplicated_header_names_are_rejected(files, tmp_path, capsys):
+    twice = tmp_path / "twice.csv"
+    frame = pd.read_csv(files[0])
+    frame.insert(2, "force2", frame["force"])
+    text = frame.to_csv(index=False).replace("force2", "force", 1)
+    twice.write_text(text)
+    assert _fit([twice], tmp_path / "m.joblib") == 1
+    line = _error(capsys)
+    assert "twice.csv" in line and "'force' more than once" in line
+
+
+def test_an_input_that_never_changes_is_rejected(files, tmp_path, capsys):
+    paths = []
+    for k, path in enumerate(files[:2]):
+        paths.append(tmp_path / f"zero{k}.csv")
+        pd.read_csv(path).assign(force=0.0).to_csv(paths[-1], index=False)
+    assert _fit(paths, tmp_path / "m.joblib") == 1
+    line = _error(capsys)
+    assert "input column 'force' holds the single value 0" in line
+    assert not (tmp_path / "m.joblib").exists()
+
+
 def test_help_shows_every_default(capsys):
     parser = build_parser()
     (commands,) = [

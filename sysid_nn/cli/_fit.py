@@ -25,6 +25,7 @@ from sysid_nn.cli._common import (
 )
 from sysid_nn.cli._records import (
     _check_columns,
+    _check_inputs_vary,
     _data_arguments,
     _frame_path,
     _read_records,
@@ -182,9 +183,10 @@ def _run_fit(args: argparse.Namespace) -> int:
     estimator, params = _estimator(args)
     sources = [*args.files, *(args.val or [])]
     _check_output(args.save, "--save", overwrite=args.overwrite, inputs=sources)
-    read = (args.split_by, args.time_column)
+    read = (args.split_by, args.time_column, args.sep, args.decimal)
     records = _read_records(args.files, [*inputs, *outputs], *read)
     val = _read_records(args.val, [*inputs, *outputs], *read) if args.val else None
+    _check_inputs_vary(records, inputs)
     dt = _resolve_dt(args.dt, records)
     if val is not None:
         _resolve_dt(dt, val, source="the training files' dt")

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import csv
 import re
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,6 +78,20 @@ def _data_arguments(p: argparse.ArgumentParser) -> None:
         "t_s, 'time [s]', ...), 'none' ignores the files' times",
     )
     p.add_argument(
+        "--sep",
+        default="auto",
+        metavar="CHAR",
+        help="field separator of .csv files; 'auto' takes the one of ',', ';' "
+        "and tab found most often in the header line",
+    )
+    p.add_argument(
+        "--decimal",
+        default="auto",
+        metavar="CHAR",
+        help="decimal mark of .csv files; 'auto' is ',' in files separated by "
+        "';' or tabs whose numbers hold commas (e.g. 0,25), else '.'",
+    )
+    p.add_argument(
         "--units",
         action="append",
         type=_unit_pair,
@@ -86,17 +102,64 @@ def _data_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def _read_frame(path: Path):
+_SEPARATORS = (",", ";", "\t")
+#: A number written with a decimal comma, e.g. ``-0,25`` or ``3,1e-4``.
+_DECIMAL_COMMA = re.compile(r"[-+]?\d+,\d+([eE][-+]?\d+)?")
+
+
+def _csv_format(path: Path, sep: str, decimal: str) -> tuple[str, str, list[str]]:
+    """Separator and decimal mark of a CSV file (``auto``: sniffed) and its header.
+
+    Lab exports often separate by ``;`` and write decimal commas; the header
+    line and the first data line tell.
+    """
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            lines = [f.readline(), f.readline()]
+    except (OSError, UnicodeDecodeError) as exc:
+        raise _InputError(f"cannot read {path}: {_reason(exc)}") from None
+    header, first = (line.rstrip("\r\n") for line in lines)
+    if sep == "auto":
+        counts = [header.count(c) for c in _SEPARATORS]
+        sep = _SEPARATORS[counts.index(max(counts))] if max(counts) else ","
+    if decimal == "auto":
+        cells = first.split(sep)
+        comma = sep != "," and any(_DECIMAL_COMMA.fullmatch(c.strip()) for c in cells)
+        decimal = "," if comma else "."
+    if sep == decimal:
+        raise _InputError(
+            f"cannot read {path}: the separator and the decimal mark are both "
+            f"{sep!r}; give them with --sep and --decimal."
+        )
+    names = next(csv.reader([header], delimiter=sep)) if header else []
+    return sep, decimal, [n.strip() for n in names]
+
+
+def _read_frame(path: Path, sep: str = "auto", decimal: str = "auto"):
     import pandas as pd
 
     try:
         if path.suffix.lower() == ".csv":
-            return pd.read_csv(path)
+            sep, decimal, names = _csv_format(path, sep, decimal)
+            twice = sorted({n for n in names if names.count(n) > 1})
+            if twice:
+                raise _InputError(
+                    f"{path} names column(s) {', '.join(map(repr, twice))} more "
+                    "than once in its header; rename them so that each column "
+                    "has its own name."
+                )
+            frame = pd.read_csv(path, sep=sep, decimal=decimal)
+            frame.attrs["csv_format"] = (sep, decimal)
+            return frame
         return pd.read_parquet(path)
     except (OSError, ImportError) as exc:
         raise _InputError(f"cannot read {path}: {_reason(exc)}") from None
     except ValueError as exc:  # a parser's complaint about the contents
-        raise _InputError(f"cannot read {path}: {_one_line(exc)}") from None
+        raise _InputError(
+            f"cannot read {path}: {_one_line(exc)} (a .csv file separated by "
+            "';' or tabs, or with decimal commas, is read with --sep and "
+            "--decimal)"
+        ) from None
 
 
 def _time_column(frame, requested: str, path: Path) -> str | None:
@@ -113,7 +176,7 @@ def _time_column(frame, requested: str, path: Path) -> str | None:
     return found[0] if found else None
 
 
-def _numbers(frame, column: str, where: str):
+def _numbers(frame, column: str, where: str, *, time: bool = False):
     """Finite float values of a column, or an error naming file, column and row."""
     import numpy as np
     import pandas as pd
@@ -127,10 +190,35 @@ def _numbers(frame, column: str, where: str):
         shown = "an empty or NaN cell" if pd.isna(value) else repr(str(value))
         raise _InputError(
             f"{where}, column {column!r}: {bad.size} value(s) that are not finite "
-            f"numbers, the first {shown} in data row {frame.index[row] + 1}."
-            " Remove or fill them first."
+            f"numbers, the first {shown} in data row {frame.index[row] + 1}. "
+            + _cell_advice(frame, raw, column, time=time)
         )
     return values
+
+
+def _cell_advice(frame, raw, column: str, *, time: bool) -> str:
+    """How to read a column whose cells are not numbers."""
+    import numpy as np
+    import pandas as pd
+
+    text = raw.dropna().astype(str).str.strip()
+    if time and len(text) > 1:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # format guessing
+            stamps = pd.to_datetime(text, errors="coerce")
+        if stamps.notna().all():
+            steps = np.diff(stamps.to_numpy()).astype("timedelta64[ns]")
+            dt = np.median(steps.astype(np.float64)) / 1e9
+            return (
+                f"The column holds dates and times, not seconds: pass "
+                f"--time-column none --dt {dt:g} (the step in seconds)."
+            )
+    sep, decimal = frame.attrs.get("csv_format", (None, None))
+    if decimal == "." and text.str.fullmatch(_DECIMAL_COMMA.pattern).any():
+        return "The numbers look like decimal commas: pass --decimal ','."
+    if any(c in str(column) for c in _SEPARATORS if c != sep) and sep is not None:
+        return "The file looks separated by another character: pass --sep."
+    return "Remove or fill them first."
 
 
 def _sample_step(t, frame, column: str, where: str, split_by: str | None) -> float:
@@ -141,6 +229,12 @@ def _sample_step(t, frame, column: str, where: str, split_by: str | None) -> flo
     if steps.size == 0:
         raise _InputError(f"{where}: one sample only; an experiment needs more.")
     back = np.flatnonzero(steps <= 0)
+    if back.size > steps.size // 2:  # mostly backwards: not several experiments
+        raise _InputError(
+            f"{where}: time column {column!r} runs backwards (t = {t[1]:g} after "
+            f"{t[0]:g} in the first data rows); sort the file by time, or pass "
+            "--time-column none and --dt if the rows are in time order."
+        )
     if back.size and split_by is None:
         row = back[0] + 1
         hint = (
@@ -185,11 +279,13 @@ def _read_records(
     columns: Sequence[str],
     split_by: str | None,
     time_column: str = "auto",
+    sep: str = "auto",
+    decimal: str = "auto",
 ) -> _Records:
     """The columns of every experiment in the files, checked, and their dt."""
     records = _Records({c: [] for c in columns})
     for path in files:
-        frame = _read_frame(path)
+        frame = _read_frame(path, sep, decimal)
         wanted = [*columns, *([split_by] if split_by else [])]
         missing = [c for c in wanted if c not in frame.columns]
         if missing:
@@ -200,15 +296,15 @@ def _read_records(
         t_col = _time_column(frame, time_column, path)
         groups = frame.groupby(split_by, sort=True) if split_by else [(None, frame)]
         for key, part in groups:
+            part.attrs.update(frame.attrs)  # the CSV format, for advice
             where = f"{path}" + (f" ({split_by} = {key})" if split_by else "")
             for c in columns:
                 records.columns[c].append(_numbers(part, c, where))
             records.origins.append(where)
             if t_col is None:
                 continue
-            dt = _sample_step(
-                _numbers(part, t_col, where), part, t_col, where, split_by
-            )
+            t = _numbers(part, t_col, where, time=True)
+            dt = _sample_step(t, part, t_col, where, split_by)
             if records.dt is None:
                 records.dt, records.dt_origin = dt, f"column {t_col!r} of {where}"
             elif abs(dt - records.dt) > _DT_TOLERANCE * records.dt:
@@ -276,3 +372,18 @@ def _check_columns(
                 "be one input, one output or the experiment number, not more."
             )
         seen[column] = option
+
+
+def _check_inputs_vary(records: _Records, inputs: Sequence[str]) -> None:
+    """Refuse an input column that holds one value in every experiment."""
+    import numpy as np
+
+    for column in inputs:
+        values = np.concatenate(records.columns[column])
+        if values.size and np.all(values == values[0]):
+            raise _InputError(
+                f"input column {column!r} holds the single value {values[0]:g} in "
+                f"every experiment ({', '.join(records.origins)}): the model "
+                "cannot learn the response to an input that never changes; "
+                "check that --input names the excitation column."
+            )

@@ -143,6 +143,8 @@ def _run_validate(args: argparse.Namespace) -> int:
         [*model.inputs, *model.outputs],
         args.split_by,
         args.time_column,
+        args.sep,
+        args.decimal,
     )
     dt = _resolve_dt(args.dt, records, fallback=bundle.dt)
     if abs(dt - bundle.dt) > _DT_TOLERANCE * bundle.dt:
