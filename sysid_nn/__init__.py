@@ -25,6 +25,7 @@ _LAZY = {
     "ISSMRegressor": "sysid_nn._issm",
     "DivergenceWarning": "sysid_nn._base",
     "UnstablePredictorWarning": "sysid_nn._issm",
+    "load_model": "sysid_nn._saved",
 }
 
 __all__ = [
@@ -33,6 +34,7 @@ __all__ = [
     "ISSMRegressor",
     "TDLRegressor",
     "UnstablePredictorWarning",
+    "load_model",
 ]
 
 

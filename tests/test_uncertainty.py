@@ -327,6 +327,8 @@ def test_cli_validate_draws_and_reports_bands(tmp_path, capsys):
     assert np.all((table["coverage"] > 0.8) & (table["coverage"] < 0.97))
     assert "90 % prediction band of the free run covers" in printed
     assert (out / "band_0.png").exists() and (out / "band_1.png").exists()
+    report = (out / "report.md").read_text()
+    assert "`band.csv`" in report and "`band_<k>.png`" in report
     with pytest.raises(SystemExit):
         main([*argv, "--out", str(out), "--band", "95"])
 

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import sys
+import warnings
 from pathlib import Path
 
 from sysid_nn.cli._common import (
+    _PROG,
     _add_output_flags,
     _add_parallel,
     _bounded,
@@ -62,6 +65,13 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
         "level (e.g. 0.95) and report the share of samples inside it "
         "(band.csv, band_<k>.png in --out)",
     )
+    p.add_argument(
+        "--series",
+        choices=("csv", "parquet", "none"),
+        default="csv",
+        help="file format of series.<format> in --out: every record with the "
+        "model's one-step predictions and free runs (parquet needs pyarrow)",
+    )
     _add_parallel(p)
     _add_output_flags(p, "--out directory")
 
@@ -71,49 +81,19 @@ _band_level = _bounded(
 )
 
 
-def _write_bands(model, records, out: Path, dt: float, level: float) -> float:
-    """Free runs with their prediction bands: figures, band.csv, pooled coverage."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-    import pandas as pd
-
-    from sysid_nn.plotting import plot_band
-    from sysid_nn.uncertainty import interval_coverage, normal_interval
-
-    X, y = model.arrays(records)
-    mean, std = model.estimator.simulate(X, return_std=True)
-    rows, bounds = [], []
-    for k, (yk, mk, sk) in enumerate(zip(y, mean, std, strict=True)):
-        yk, mk, sk = (np.reshape(a, (len(a), -1)) for a in (yk, mk, sk))
-        lower, upper = normal_interval(mk, sk, level)
-        bounds.append((yk, lower, upper))
-        rows.append({"record": k, "coverage": interval_coverage(yk, lower, upper)})
-        t = dt * np.arange(len(yk))
-        ax = plot_band(t, mk[:, 0], sk[:, 0], level=level, label="simulated")
-        ax.plot(t, yk[:, 0], "k-", linewidth=0.6, label="measured")
-        ax.set_xlabel("time [s]")
-        ax.set_ylabel(model.outputs[0])
-        ax.legend()
-        ax.figure.savefig(out / f"band_{k}.png", dpi=90)
-        plt.close(ax.figure)
-    pd.DataFrame(rows).to_csv(out / "band.csv", index=False)
-    return interval_coverage(*(list(b) for b in zip(*bounds, strict=True)))
-
-
 def _load_model(path: Path):
-    import joblib
+    from sysid_nn._saved import _read_bundle
 
     try:
-        bundle = joblib.load(path)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UserWarning)
+            bundle = _read_bundle(path)
     except OSError as exc:
         raise _InputError(f"cannot read {path}: {_reason(exc)}") from None
-    except Exception as exc:  # unpickling garbage raises anything
-        raise _InputError(f"cannot read {path} as a saved model: {exc}") from None
-    if not (hasattr(bundle, "get") and bundle.get("model") is not None):
-        raise _InputError(f"{path} was not written by `sysid-nn fit --save`.")
+    except ValueError as exc:
+        raise _InputError(str(exc)) from None
+    for w in caught:  # the version stamp: one line, not a source excerpt
+        print(f"{_PROG}: warning: {w.message}", file=sys.stderr)
     return bundle
 
 
@@ -154,6 +134,11 @@ def _run_validate(args: argparse.Namespace) -> int:
             "step it was identified at: resample the records."
         )
     _check_max_lag(args.max_lag, records)
+    series = None if args.series == "none" else args.series
+    if series == "parquet":
+        from sysid_nn.study._run import _check_parquet
+
+        _check_parquet()  # before the long work
     units = bundle.get("units", {}) | _units(
         [*model.inputs, *model.outputs], args.units
     )
@@ -172,6 +157,8 @@ def _run_validate(args: argparse.Namespace) -> int:
             + (f", split by {args.split_by!r}." if args.split_by else "."),
         ],
         progress=not args.quiet,
+        series=series,
+        band=args.band,
     )
     if not args.quiet:
         X, y = model.arrays(records.columns)
@@ -184,12 +171,12 @@ def _run_validate(args: argparse.Namespace) -> int:
                 _score_lines(_scores(model.estimator, X, y), model.outputs, units)
             )
         )
-        print(f"wrote {result.out_dir}/report.md, results.csv, summary.csv and figures")
-    if args.band is not None:
-        coverage = _write_bands(model, records.columns, result.out_dir, dt, args.band)
-        if not args.quiet:
+        written = "results.csv, summary.csv" + (f", series.{series}" if series else "")
+        print(f"wrote {result.out_dir}/report.md, {written} and figures")
+        if args.band is not None:
             print(
                 f"{100 * args.band:g} % prediction band of the free run covers "
-                f"{100 * coverage:.1f} % of the samples (band.csv, band_<k>.png)"
+                f"{100 * result.band_coverage:.1f} % of the samples (band.csv, "
+                "band_<k>.png)"
             )
     return 0
