@@ -43,19 +43,36 @@ def _input_list(data: Any, residuals: list[np.ndarray]) -> list[np.ndarray]:
     return seqs
 
 
+def max_lag_bound(n_samples: int) -> int:
+    """Largest ``max_lag`` the residual tests accept on ``n_samples`` samples.
+
+    The tests need the lags and as many samples again, plus a margin of ten:
+    ``n_samples >= 2 * max_lag + 10``.
+    """
+    return (n_samples - 10) // 2
+
+
+def check_max_lag(max_lag: Any, n_samples: int, name: str = "max_lag") -> None:
+    """Refuse a ``max_lag`` that is not an integer or too large for the records."""
+    if isinstance(max_lag, bool) or not isinstance(max_lag, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer >= 1; got {max_lag!r}.")
+    bound = max_lag_bound(n_samples)
+    if bound < 1:
+        raise ValueError(
+            f"the residual tests need at least 12 samples per sequence, but the "
+            f"shortest has {n_samples}; test longer records."
+        )
+    if not 1 <= max_lag <= bound:
+        raise ValueError(
+            f"{name} must be between 1 and {bound} for sequences of {n_samples} "
+            f"samples (the shortest; the tests need 2 * {name} + 10 samples); got "
+            f"{max_lag!r}. Use {name}={bound} or less, or longer records."
+        )
+
+
 def _check_settings(max_lag: Any, alpha: Any, residuals: list[np.ndarray]) -> float:
     """Validate ``max_lag`` and ``alpha``; return the band quantile z."""
-    n_min = min(r.size for r in residuals)
-    if (
-        isinstance(max_lag, bool)
-        or not isinstance(max_lag, (int, np.integer))
-        or not 1 <= max_lag < n_min
-    ):
-        raise ValueError(
-            f"max_lag must be an integer with 1 <= max_lag < n_samples = {n_min} "
-            f"(of the shortest sequence); got {max_lag!r}. Use a smaller max_lag "
-            "(about 25, well below n_samples) or longer records."
-        )
+    check_max_lag(max_lag, min(r.size for r in residuals))
     if not (isinstance(alpha, (float, int)) and 0 < alpha < 1):
         raise ValueError(f"alpha must be a number in (0, 1), e.g. 0.05; got {alpha!r}.")
     return float(stats.norm.ppf(1 - alpha / 2))

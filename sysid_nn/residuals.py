@@ -55,6 +55,7 @@ from sysid_nn._correlation_tests import (
     NonlinearTestResult,
     WhitenessResult,
     _WholeFrame,
+    check_max_lag,
     cross_correlation_test,
     nonlinear_correlation_tests,
     whiteness_test,
@@ -353,6 +354,8 @@ def analyze_residuals(
             f"skip={skip} leaves no samples of the shortest sequence ({shortest} "
             "samples); use a skip well below the sequence length."
         )
+    # The same rule as the tests themselves, checked before running the model.
+    check_max_lag(max_lag, shortest - skip)
     if mode == "prediction":
         model = estimator.predict(X, y, horizon=horizon)
     else:

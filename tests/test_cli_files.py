@@ -422,7 +422,7 @@ def test_fit_progress_lines_and_closing_line(files, tmp_path, capsys):
     assert "\r" not in captured.err
     closing = captured.out.splitlines()
     assert (
-        "trained on 2 experiment(s), weights chosen (early stopping, restarts) on "
+        "trained on 2 experiment(s), weights chosen by early stopping on "
         "1 experiment(s)" in closing[0]
     )
     # The validation records chose the weights: not called held-out.
@@ -436,14 +436,14 @@ def test_fit_progress_lines_and_closing_line(files, tmp_path, capsys):
 def test_fit_single_record_scores_its_held_out_tail(files, tmp_path, capsys):
     assert _fit(files[:1], tmp_path / "m.joblib") == 0
     out = capsys.readouterr().out
-    assert "trained on 1 experiment(s), weights chosen (early stopping, " in out
-    assert "restarts) on the last 20% of" in out and "held-out" not in out
+    assert "trained on 1 experiment(s), weights chosen by early stopping on " in out
+    assert "on the last 20% of" in out and "held-out" not in out
 
 
 def test_progress_survives_parallel_restarts(files, tmp_path, capsys):
     argv = ["--n-init", "2", "--n-jobs", "2", "--verbose"]
     assert _fit(files, tmp_path / "m.joblib", *argv) == 0
-    assert "restarts) on 1 experiment(s)" in capsys.readouterr().out
+    assert "early stopping on 1 experiment(s)" in capsys.readouterr().out
 
 
 def test_progress_bar_on_a_terminal(monkeypatch):

@@ -241,7 +241,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     _write_atomic(args.save, dump)
     print(
         f"fitted {model.label} in {estimator.fit_time_:.1f} s: trained on "
-        f"{len(X_fit)} experiment(s), weights chosen (early stopping, restarts) "
+        f"{len(X_fit)} experiment(s), weights chosen by early stopping "
         f"on {where} (dt = {dt:g} s); saved to {args.save}. "
         + (
             "Scores on the validation data that chose the weights (optimistic; "

@@ -98,14 +98,21 @@ def _load_model(path: Path):
 
 
 def _check_max_lag(max_lag: int, records: _Records) -> None:
-    # The residual tests need the lags and as many samples again, plus a margin.
+    from sysid_nn._correlation_tests import max_lag_bound
+
     lengths = records.lengths()
     shortest = min(range(len(lengths)), key=lengths.__getitem__)
-    if lengths[shortest] < 2 * max_lag + 10:
+    bound = max_lag_bound(lengths[shortest])
+    if max_lag > bound:
+        fix = (
+            f"use --max-lag {bound} or less"
+            if bound >= 1
+            else "the residual tests need records of at least 12 samples"
+        )
         raise ValueError(
             f"--max-lag {max_lag} needs records of at least {2 * max_lag + 10} "
             f"samples, but {records.origins[shortest]} has {lengths[shortest]}; "
-            f"use --max-lag {max(1, (lengths[shortest] - 10) // 2)} or less."
+            f"{fix}."
         )
 
 
