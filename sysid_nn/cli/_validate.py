@@ -117,6 +117,8 @@ def _check_max_lag(max_lag: int, records: _Records) -> None:
 
 
 def _run_validate(args: argparse.Namespace) -> int:
+    from sysid_nn._compile import prepare_kernels
+    from sysid_nn._sensitivity import chaos_hint
     from sysid_nn.study import run_validation
 
     bundle = _load_model(args.model)
@@ -146,6 +148,11 @@ def _run_validate(args: argparse.Namespace) -> int:
         from sysid_nn.study._run import _check_parquet
 
         _check_parquet()  # before the long work
+    prepare_kernels(show=not args.quiet)  # before the first run of the model
+    X_all, _ = model.arrays(records.columns)
+    hint = chaos_hint(model.estimator, max(X_all, key=len))
+    if hint:
+        print(f"{_PROG}: warning: {hint}", file=sys.stderr)
     units = bundle.get("units", {}) | _units(
         [*model.inputs, *model.outputs], args.units
     )
@@ -162,6 +169,7 @@ def _run_validate(args: argparse.Namespace) -> int:
             f"Model: {args.model}, fitted on {', '.join(bundle.files)}.",
             f"Validation data: {', '.join(map(str, args.files))}"
             + (f", split by {args.split_by!r}." if args.split_by else "."),
+            *([f"Warning: {hint[0].upper()}{hint[1:]}"] if hint else []),
         ],
         progress=not args.quiet,
         series=series,
