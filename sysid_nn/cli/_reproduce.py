@@ -34,8 +34,9 @@ def _add_reproduce(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--quick",
         action="store_true",
-        help="CI-sized run (under a minute): 5 test realisations, one restart "
-        "per network",
+        help="CI-sized run (about 15 s on 2 cores once the kernels are "
+        "compiled; a first run compiles them, 1-2 minutes): 5 test "
+        "realisations, one restart per network",
     )
     p.add_argument(
         "--n-test",
