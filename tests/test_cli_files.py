@@ -467,6 +467,7 @@ def test_progress_bar_on_a_terminal(monkeypatch):
     assert screen.getvalue() == text  # nothing, and the loss is not computed
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 def test_progress_lines_within_a_long_stage(monkeypatch, capsys):
     from sysid_nn import TDLRegressor
 

@@ -72,7 +72,7 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
         "--model",
         choices=_MODELS,
         default="tdl",
-        help="network; with the defaults both stay well ahead of the linear "
+        help="network; both stay well ahead of the linear "
         "model at 0.1-3 %% output noise, best with several records; issm "
         "also takes a second measured output (e.g. velocity) well (see the "
         "user guide's pitfalls page)",
