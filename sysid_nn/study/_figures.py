@@ -159,7 +159,9 @@ def _correlation_figure(models, data, evaluation, kind) -> Any:
         f"One-step prediction errors, {_first_record(data)}: lags up to {span:.3g} s"
         + (f" (natural period {period:.3g} s)" if period else "")
         + f";\nshaded: the lags of the tables' tests (up to {evaluation.max_lag} "
-        "samples of each model)",
+        "samples of each model), whose verdicts are chi-square tests over all "
+        "those lags together;\ndotted: the per-lag band, which a few lags leave "
+        "by chance",
         fontsize=9,
     )
     return fig
