@@ -185,8 +185,9 @@ _ABOUT = {
         "residual tests, error statistics and figures of a saved model",
         "Run a model saved by `sysid-nn fit` on validation records: "
         "one-step prediction and free-run simulation, residual tests, "
-        "eq. 19-20 statistics, figures and report.md in --out; the "
-        "scores of every output are printed under its column name.",
+        "error statistics, figures, the predicted and simulated series "
+        "and report.md in --out; the scores of every output are printed "
+        "under its column name.",
     ),
 }
 
