@@ -28,7 +28,7 @@ the whole record and scored on the test records like the others. Results go
 to ``results_field_order.md``.
 
 The measured benchmarks are read with the ``sysid_nn.datasets`` loaders
-(``pip install "sysid_nn[benchmarks]"``) from ``--data-home`` (default: the
+(``pip install ".[benchmarks]"``) from ``--data-home`` (default: the
 loaders' data directory, ``SYSID_NN_DATA`` or ``~/sysid_nn_data``); they are
 downloaded there on first use.
 """

@@ -73,7 +73,9 @@ fig.tight_layout()
 # -----------------------
 # Silverbox, Wiener-Hammerstein 2009, Cascaded Tanks and EMPS are measured
 # data sets that the community's loader downloads (``pip install
-# "sysid_nn[benchmarks]"``; the files are then kept in ``~/sysid_nn_data``).
+# ".[benchmarks]"`` in a checkout, or ``pip install
+# nonlinear-benchmarks==1.0.1``; the files are then kept in
+# ``~/sysid_nn_data``, where files you already have can be put too).
 # Each test record starts in the middle of an experiment, so its first
 # ``n_skip`` samples are left out of the score:
 #

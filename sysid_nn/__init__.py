@@ -26,6 +26,7 @@ _LAZY = {
     "DivergenceWarning": "sysid_nn._exceptions",
     "InconsistentVersionWarning": "sysid_nn._exceptions",
     "UnstablePredictorWarning": "sysid_nn._issm",
+    "load_model": "sysid_nn._saved",
 }
 
 __all__ = [
@@ -35,6 +36,7 @@ __all__ = [
     "InconsistentVersionWarning",
     "TDLRegressor",
     "UnstablePredictorWarning",
+    "load_model",
 ]
 
 

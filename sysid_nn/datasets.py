@@ -13,20 +13,27 @@ window; the community scores a free run from rest on the samples after it).
 The train/test splits are the ones of the community's loader,
 ``nonlinear-benchmarks`` 1.0.1, which the ``fetch_*`` functions call to
 download and read the files: install it with ``pip install
-"sysid_nn[benchmarks]"``.
+nonlinear-benchmarks==1.0.1`` (the ``benchmarks`` extra: ``pip install
+".[benchmarks]"`` in a checkout of this package).
 
 Downloaded files are kept in a data directory (see :func:`get_data_home`,
 scikit-learn's convention): once a benchmark is there, loading it needs no
-network. The official loader considers a benchmark present when the archive
-it downloads (the *marker* file, e.g. ``Silverbox/SilverboxFiles.zip``)
-exists in that directory, and then reads the extracted files next to it.
+network. A benchmark is there when its extracted files are, laid out as the
+official loader extracts them (e.g.
+``Silverbox/SilverboxFiles/SNLS80mV.mat``; each loader's docstring names its
+files); the archive the loader downloads
+(its *marker* file, e.g. ``Silverbox/SilverboxFiles.zip``) is not needed.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import math
 import os
+import sys
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import scipy.signal
@@ -61,14 +68,38 @@ MARKERS = {
     ),
 }
 
+_BOUCWEN_TESTS = "BoucWenFiles/Test signals/Validation signals"
+
+#: Extracted files the official loader reads, relative to each benchmark's
+#: folder in the data directory.
+FILES = {
+    "Silverbox": ("SilverboxFiles/SNLS80mV.mat",),
+    "WienerHammerBenchMark": ("WienerHammerBenchMark.mat",),
+    "Cascaded_Tanks": ("CascadedTanksFiles/dataBenchmark.mat",),
+    "EMPS": ("DATA_EMPS.mat", "DATA_EMPS_PULSES.mat"),
+    "BoucWen": tuple(
+        f"{_BOUCWEN_TESTS}/{kind}val_{signal}.mat"
+        for signal in ("multisine", "sinesweep")
+        for kind in "uy"
+    ),
+}
+
+#: How to install the official loader: from the package index, or the extra.
+_INSTALL_HINT = (
+    "install it with: pip install nonlinear-benchmarks==1.0.1 (or, in a checkout "
+    'of sysid_nn, pip install ".[benchmarks]")'
+)
+
 
 def get_data_home(data_home: str | os.PathLike | None = None) -> str:
-    """Return the path of the data directory, creating it if needed.
+    """Return the path of the data directory.
 
     The directory holds the downloaded benchmark files. By default it is
-    ``~/sysid_nn_data``; the environment variable ``SYSID_NN_DATA`` or the
-    ``data_home`` argument choose another one (as scikit-learn's
-    ``get_data_home`` does with ``SCIKIT_LEARN_DATA``). ``~`` is expanded.
+    ``~/sysid_nn_data``, created when missing; the environment variable
+    ``SYSID_NN_DATA`` or the ``data_home`` argument choose another one (as
+    scikit-learn's ``get_data_home`` does with ``SCIKIT_LEARN_DATA``), which
+    must exist: a mistyped folder is an error, not a new empty one. ``~`` is
+    expanded.
 
     Parameters
     ----------
@@ -81,6 +112,11 @@ def get_data_home(data_home: str | os.PathLike | None = None) -> str:
     str
         The absolute path of the data directory.
 
+    Raises
+    ------
+    FileNotFoundError
+        A ``data_home`` or ``SYSID_NN_DATA`` that is not an existing folder.
+
     Examples
     --------
     >>> import tempfile
@@ -89,10 +125,19 @@ def get_data_home(data_home: str | os.PathLike | None = None) -> str:
     >>> get_data_home(folder) == folder
     True
     """
+    source = "data_home"
+    if data_home is None and DATA_HOME_ENV in os.environ:
+        data_home, source = os.environ[DATA_HOME_ENV], DATA_HOME_ENV
     if data_home is None:
-        data_home = os.environ.get(DATA_HOME_ENV, os.path.join("~", "sysid_nn_data"))
+        path = Path("~", "sysid_nn_data").expanduser().resolve()
+        path.mkdir(parents=True, exist_ok=True)
+        return str(path)
     path = Path(data_home).expanduser().resolve()
-    path.mkdir(parents=True, exist_ok=True)
+    if not path.is_dir():
+        raise FileNotFoundError(
+            f"{source} {str(data_home)!r} is not an existing folder; check its "
+            "spelling, or create it first to keep the benchmark files there."
+        )
     return str(path)
 
 
@@ -103,8 +148,7 @@ def _official_loader():
         raise ImportError(
             "The benchmark loaders need the optional dependency "
             "'nonlinear-benchmarks' (the community's loader, which downloads and "
-            "splits the files); install it with: pip install "
-            "'sysid_nn[benchmarks]'."
+            f"splits the files); {_INSTALL_HINT}."
         ) from exc
     return nonlinear_benchmarks
 
@@ -116,14 +160,37 @@ def _call_official(name: str, data_home, download_if_missing: bool, **kwargs) ->
         module = module.not_splitted_benchmarks
     loader = getattr(module, name)
     home = get_data_home(data_home)
-    folder, marker = MARKERS[name]
-    if not download_if_missing and not (Path(home) / folder / marker).is_file():
-        raise OSError(
-            f"{name} data not found in {home!r} (no {folder}/{marker}) and "
-            f"download_if_missing is False; pass download_if_missing=True to "
-            f"download it, or point data_home to a directory that holds it."
+    folder = Path(home) / MARKERS[name][0]
+    missing = [f for f in FILES[name] if not (folder / f).is_file()]
+    if not missing:
+        # The files are here: the official loader reads them, and its download
+        # step (which wants the archive as well) is skipped.
+        def here(url, name_dir, *args, dir_placement=None, **kw) -> str:
+            return os.path.join(dir_placement, name_dir)
+
+        with mock.patch.object(sys.modules[loader.__module__], "cashed_download", here):
+            return loader(dir_placement=home, **kwargs)
+    where = f"{folder / missing[0]}" + (
+        f" (and {len(missing) - 1} more file(s))" if len(missing) > 1 else ""
+    )
+    if not download_if_missing:
+        raise FileNotFoundError(
+            f"{name} benchmark not found: no {where}; put the benchmark's "
+            f"extracted files in {folder}, or pass download_if_missing=True to "
+            "download them."
         )
-    return loader(dir_placement=home, **kwargs)
+    # The official loader reports retries and progress on stdout; a failure
+    # here is one sentence instead.
+    print(f"downloading the {name} benchmark into {folder} ...", file=sys.stderr)
+    with contextlib.redirect_stdout(io.StringIO()):
+        try:
+            return loader(dir_placement=home, **kwargs)
+        except Exception as exc:  # the loader raises bare Exception/ValueError
+            reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else ""
+            raise ConnectionError(
+                f"cannot download the {name} benchmark into {folder} ({reason}); "
+                f"with no network, put its extracted files there (missing: {where})."
+            ) from None
 
 
 def _sequence(data) -> tuple[np.ndarray, np.ndarray]:
@@ -159,7 +226,10 @@ _LOADER_PARAMETERS_DOC = """\
         Data directory (see :func:`get_data_home`).
     download_if_missing : bool, default=True
         Download the files when they are not in ``data_home``; with
-        ``False`` a missing benchmark raises :class:`OSError`."""
+        ``False`` a missing benchmark raises :class:`FileNotFoundError`
+        naming the first missing file; a failed download raises
+        :class:`ConnectionError`. Extracted files already in ``data_home``
+        are read without any download."""
 
 #: Returns section shared by the loaders of split benchmarks.
 _LOADER_RETURNS_DOC = """\
@@ -194,7 +264,8 @@ def fetch_silverbox(
     testing (``"multisine"``); the arrow (samples 100 to 40575) is a second
     test, in full (``"arrow_full"``, whose end requires extrapolation beyond
     the training amplitudes) and its first 32 000 samples
-    (``"arrow_no_extrapolation"``). Scoring skips 50 samples.
+    (``"arrow_no_extrapolation"``). Scoring skips 50 samples. File read
+    from the data directory: ``Silverbox/SilverboxFiles/SNLS80mV.mat``.
 
     {parameters}
 
@@ -228,7 +299,8 @@ def fetch_wiener_hammerstein(
     excited by filtered Gaussian noise, sampled at 51.2 kHz (Schoukens,
     Suykens & Ljung, 2009). Official split: samples 5200 to 184000, the
     first 100 000 for training and validation, the remaining 78 800 for
-    testing (``"test"``). Scoring skips 50 samples.
+    testing (``"test"``). Scoring skips 50 samples. File read from the data
+    directory: ``WienerHammerBenchMark/WienerHammerBenchMark.mat``.
 
     {parameters}
 
@@ -261,7 +333,8 @@ def fetch_cascaded_tanks(
     sampled every 4 s (Schoukens, Mattson, Wigren & Noël, 2016). Official
     split: the estimation record for training and validation, the
     validation record for testing (``"test"``), 1024 samples each. Scoring
-    skips 50 samples.
+    skips 50 samples. File read from the data directory:
+    ``Cascaded_Tanks/CascadedTanksFiles/dataBenchmark.mat``.
 
     {parameters}
 
@@ -294,6 +367,8 @@ def fetch_emps(
     sampled at 1 kHz, recorded in closed loop (Janot, Gautier & Brunot,
     2019). Official split: ``DATA_EMPS`` for training and validation,
     ``DATA_EMPS_PULSES`` for testing (``"test"``). Scoring skips 20 samples.
+    Files read from the data directory: ``EMPS/DATA_EMPS.mat`` and
+    ``EMPS/DATA_EMPS_PULSES.mat``.
 
     {parameters}
 
@@ -334,6 +409,9 @@ def fetch_boucwen(
     to a sine sweep. The official loader defines no initialisation window
     (``n_skip = 0``); the multisine record is periodic, so a model can be run
     from rest over a few repetitions of its input and scored on the last.
+    Files read from the data directory: ``uval_multisine.mat``,
+    ``yval_multisine.mat``, ``uval_sinesweep.mat`` and ``yval_sinesweep.mat``
+    in ``BoucWen/BoucWenFiles/Test signals/Validation signals``.
 
     {parameters}
 

@@ -116,13 +116,20 @@ def interval_coverage(y_true, lower, upper):
         Measured values.
     lower, upper : array-like or list of array-like
         Bounds of the interval, shaped like ``y_true`` (for example from
-        :func:`normal_interval`).
+        :func:`normal_interval`); ``lower <= upper`` wherever both are
+        numbers.
 
     Returns
     -------
     coverage : float
         Share of all samples (of all sequences and outputs) with ``lower <=
         y_true <= upper``; a calibrated 95 % interval covers about 0.95.
+
+    Raises
+    ------
+    ValueError
+        Shapes that differ, or ``lower > upper`` somewhere (a mean and a
+        standard deviation passed as the bounds).
 
     Examples
     --------
@@ -147,6 +154,14 @@ def interval_coverage(y_true, lower, upper):
             raise ValueError(
                 f"y_true, lower and upper must have the same shapes; got "
                 f"{y.shape}, {lo.shape} and {up.shape}."
+            )
+        crossed = np.flatnonzero(lo > up)  # NaN bounds compare False: allowed
+        if crossed.size:
+            raise ValueError(
+                f"lower exceeds upper at {crossed.size} of {lo.size} samples (the "
+                f"first at flat index {crossed[0]}); pass the interval's bounds, "
+                "e.g. interval_coverage(y, *normal_interval(mean, std, 0.95)), "
+                "not a mean and a standard deviation."
             )
         inside += int(np.sum((lo <= y) & (y <= up)))
         n += y.size

@@ -148,18 +148,41 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     argv = ["validate", "--model", str(model), str(many), "--split-by", "realization"]
     assert main([*argv, "--out", str(out), "--max-lag", "10", "--quiet"]) == 0
     expected = {*list(FIGURES)[1:7], "results.csv", "summary.csv", "report.md"}
-    assert {p.name for p in out.iterdir()} == expected
+    assert {p.name for p in out.iterdir()} == expected | {"series.csv"}
     results = pd.read_csv(out / "results.csv")
-    assert sorted(set(results["realization"])) == [0, 1]
+    assert sorted(set(results["record"])) == [0, 1]
+    summary = pd.read_csv(out / "summary.csv")
+    assert set(summary["model"]) == {bundle.model.label}
     # The saved model reproduces the validation numbers.
     est = bundle.model.estimator
     part = pd.read_csv(many).query("realization == 2")
     sim = est.simulate(part[["force"]].to_numpy())
     y = part["displacement"].to_numpy()
-    row = results.query("realization == 0 and mode == 'simulation'").iloc[0]
+    row = results.query("record == 0 and mode == 'simulation'").iloc[0]
     rmse = np.sqrt(np.mean((y - sim) ** 2))
     np.testing.assert_allclose(row["nrmse"], rmse / np.std(y), rtol=1e-10)
-    assert "## Results at a glance" in (out / "report.md").read_text()
+    # The series file holds what was scored, for the user's own tools.
+    series = pd.read_csv(out / "series.csv").query("record == 0")
+    np.testing.assert_allclose(series["displacement_simulated"], sim, rtol=1e-9)
+    np.testing.assert_allclose(series["force"], part["force"])
+    pred = est.predict(part[["force"]].to_numpy(), y)
+    np.testing.assert_allclose(series["displacement_predicted"], pred, rtol=1e-9)
+    np.testing.assert_allclose(series["t"], 0.01 * np.arange(len(y)))
+    report = (out / "report.md").read_text()
+    assert "## Results at a glance" in report and "`series.csv`" in report
+    # The user's own test, in the user's words: no paper's sections or symbols.
+    own = report.replace("split by 'realization'", "")  # the user's column
+    for paper in ("section 4.", "eq. 19", "N_s", "realisation", "realization"):
+        assert paper not in own, paper
+    assert "The model's one-step residuals" in report
+    assert "Some models'" not in report
+    # Loading the saved model in Python is one public call.
+    from sysid_nn import load_model
+
+    loaded, info = load_model(model, with_info=True)
+    np.testing.assert_array_equal(loaded.simulate(part[["force"]].to_numpy()), sim)
+    assert info.inputs == ("force",) and info.outputs == ("displacement",)
+    assert type(load_model(model)) is type(est)
 
 
 def test_fit_with_validation_files(records, tmp_path, capsys):

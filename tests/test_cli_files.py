@@ -181,6 +181,65 @@ def test_forgotten_split_by_is_detected(frame, tmp_path, capsys):
     assert main([*argv, *TINY, "--save", str(tmp_path / "m.joblib")]) == 0
 
 
+# ------------------------------------------------------ the user's own files
+def test_semicolons_and_decimal_commas_are_read(files, tmp_path, capsys):
+    lab = tmp_path / "lab.csv"
+    pd.read_csv(files[0]).to_csv(lab, index=False, sep=";", decimal=",")
+    assert "0,02;" in lab.read_text().splitlines()[2]  # a lab export, really
+    save = tmp_path / "m.joblib"
+    assert _fit([lab], save, "--quiet") == 0  # sniffed
+    assert joblib.load(save).dt == pytest.approx(0.02)
+    argv = ["--quiet", "--overwrite", "--sep", ";", "--decimal", ","]
+    assert _fit([lab], save, *argv) == 0
+    capsys.readouterr()
+    # Told the wrong decimal mark: the error says which option reads the file.
+    assert _fit([lab], save, "--overwrite", "--decimal", ".") == 1
+    line = _error(capsys)
+    assert "lab.csv" in line and "--decimal ','" in line
+
+
+def test_datetime_time_column_suggests_dt(files, tmp_path, capsys):
+    stamped = tmp_path / "stamped.csv"
+    frame = pd.read_csv(files[0])
+    start = pd.Timestamp("2026-01-01 10:00:00")
+    frame["t"] = start + pd.to_timedelta(frame["t"], unit="s")
+    frame.to_csv(stamped, index=False)
+    assert _fit([stamped], tmp_path / "m.joblib") == 1
+    line = _error(capsys)
+    assert "dates and times" in line and "--time-column none --dt 0.02" in line
+
+
+def test_descending_time_column_is_not_taken_for_experiments(files, tmp_path, capsys):
+    backwards = tmp_path / "backwards.csv"
+    pd.read_csv(files[0]).iloc[::-1].to_csv(backwards, index=False)
+    assert _fit([backwards], tmp_path / "m.joblib") == 1
+    line = _error(capsys)
+    assert "runs backwards" in line and "sort the file by time" in line
+    assert "--split-by" not in line
+
+
+def test_duplicated_header_names_are_rejected(files, tmp_path, capsys):
+    twice = tmp_path / "twice.csv"
+    frame = pd.read_csv(files[0])
+    frame.insert(2, "force2", frame["force"])
+    text = frame.to_csv(index=False).replace("force2", "force", 1)
+    twice.write_text(text)
+    assert _fit([twice], tmp_path / "m.joblib") == 1
+    line = _error(capsys)
+    assert "twice.csv" in line and "'force' more than once" in line
+
+
+def test_an_input_that_never_changes_is_rejected(files, tmp_path, capsys):
+    paths = []
+    for k, path in enumerate(files[:2]):
+        paths.append(tmp_path / f"zero{k}.csv")
+        pd.read_csv(path).assign(force=0.0).to_csv(paths[-1], index=False)
+    assert _fit(paths, tmp_path / "m.joblib") == 1
+    line = _error(capsys)
+    assert "input column 'force' holds the single value 0" in line
+    assert not (tmp_path / "m.joblib").exists()
+
+
 def test_help_shows_every_default(capsys):
     parser = build_parser()
     (commands,) = [
@@ -363,9 +422,11 @@ def test_fit_progress_lines_and_closing_line(files, tmp_path, capsys):
     assert "\r" not in captured.err
     closing = captured.out.splitlines()
     assert (
-        "trained on 2 experiment(s), validated on 1 held-out experiment(s)"
-        in (closing[0])
+        "trained on 2 experiment(s), weights chosen by early stopping on "
+        "1 experiment(s)" in closing[0]
     )
+    # The validation records chose the weights: not called held-out.
+    assert "held-out" not in captured.out and "optimistic" in closing[0]
     assert "exp2.csv" in closing[0] and "R^2" not in captured.out
     assert closing[1].strip().startswith("displacement: prediction NRMSE")
     assert _fit(files, tmp_path / "q.joblib", "--quiet") == 0
@@ -375,13 +436,14 @@ def test_fit_progress_lines_and_closing_line(files, tmp_path, capsys):
 def test_fit_single_record_scores_its_held_out_tail(files, tmp_path, capsys):
     assert _fit(files[:1], tmp_path / "m.joblib") == 0
     out = capsys.readouterr().out
-    assert "trained on 1 experiment(s), validated on the held-out last 20%" in out
+    assert "trained on 1 experiment(s), weights chosen by early stopping on " in out
+    assert "on the last 20% of" in out and "held-out" not in out
 
 
 def test_progress_survives_parallel_restarts(files, tmp_path, capsys):
     argv = ["--n-init", "2", "--n-jobs", "2", "--verbose"]
     assert _fit(files, tmp_path / "m.joblib", *argv) == 0
-    assert "validated on 1 held-out" in capsys.readouterr().out
+    assert "early stopping on 1 experiment(s)" in capsys.readouterr().out
 
 
 def test_progress_bar_on_a_terminal(monkeypatch):
@@ -405,6 +467,7 @@ def test_progress_bar_on_a_terminal(monkeypatch):
     assert screen.getvalue() == text  # nothing, and the loss is not computed
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 def test_progress_lines_within_a_long_stage(monkeypatch, capsys):
     from sysid_nn import TDLRegressor
 

@@ -19,9 +19,9 @@ print(cache_dir())
 """
 
 
-def _installed_copy(tmp_path):
+def _installed_copy(tmp_path, folder="site-packages"):
     """The package copied alone into a fresh folder, as pip installs it."""
-    site = tmp_path / "site-packages"
+    site = tmp_path / folder
     shutil.copytree(
         ROOT / "sysid_nn",
         site / "sysid_nn",
@@ -62,6 +62,30 @@ def test_numba_cache_stays_out_of_the_installed_package(tmp_path):
     before = {p: p.stat().st_mtime_ns for p in cache.rglob("*.nbi")}
     assert _run(site, {"XDG_CACHE_HOME": str(tmp_path / "user-cache")}) == cache
     assert {p: p.stat().st_mtime_ns for p in cache.rglob("*.nbi")} == before
+
+
+def test_installs_of_the_same_sources_share_the_compiled_kernels(tmp_path):
+    # A regular and an editable install live in different folders; the kernels
+    # compiled by one are loaded, not compiled again, by the other.
+    user_cache = {"XDG_CACHE_HOME": str(tmp_path / "user-cache")}
+    cache = _run(_installed_copy(tmp_path, "site-packages"), user_cache)
+    before = {p: p.stat().st_mtime_ns for p in cache.rglob("*.nb*")}
+    assert before
+    assert _run(_installed_copy(tmp_path, "checkout"), user_cache) == cache
+    assert {p: p.stat().st_mtime_ns for p in cache.rglob("*.nb*")} == before
+
+
+def test_a_changed_kernel_module_recompiles(tmp_path):
+    user_cache = {"XDG_CACHE_HOME": str(tmp_path / "user-cache")}
+    site = _installed_copy(tmp_path)
+    cache = _run(site, user_cache)
+    before = {p: p.stat().st_mtime_ns for p in cache.rglob("*.nbi")}
+    # A kernel module the oscillator's kernels do not import changes.
+    with open(site / "sysid_nn" / "_kernels" / "_propagation.py", "a") as f:
+        f.write("\n# changed\n")
+    _run(site, user_cache)
+    after = {p: p.stat().st_mtime_ns for p in cache.rglob("*.nbi")}
+    assert all(after[p] != before[p] for p in before)
 
 
 def test_numba_cache_dir_setting_is_respected(tmp_path):
@@ -126,3 +150,42 @@ def test_license_is_the_declared_bsd_3_clause():
     assert text.startswith("BSD 3-Clause License")
     assert "Copyright (c) sysid_nn developers" in text
     assert "Neither the name of the copyright holder" in text
+
+
+def test_first_run_compiles_once_announced_and_apart(tmp_path, monkeypatch, capsys):
+    from sysid_nn import _compile
+
+    ran = []
+    monkeypatch.setattr(_compile, "_marker", lambda: str(tmp_path / "ready"))
+    monkeypatch.setattr(_compile, "_steps", lambda: [lambda: ran.append(1)] * 3)
+    assert _compile.prepare_kernels(show=True) > 0
+    err = capsys.readouterr().err
+    assert err.count("compiling the numerical kernels") == 1
+    assert "compiling kernels: 3/3" in err and len(ran) == 3
+    # Compiled once: the next run neither compiles nor says anything.
+    assert _compile.prepare_kernels(show=True) == 0.0
+    assert capsys.readouterr().err == "" and len(ran) == 3
+
+
+def test_fit_compiles_before_its_timed_fit(tmp_path, monkeypatch, capsys):
+    from sysid_nn import HystereticOscillator, _compile
+    from sysid_nn.cli import main
+
+    rec = HystereticOscillator(r0=0.05).generate(
+        2, n_samples=300, random_state=0, as_frame=True
+    )
+    rec.frame.to_csv(tmp_path / "r.csv", index=False)
+    order = []
+    monkeypatch.setattr(_compile, "_marker", lambda: str(tmp_path / "ready"))
+    monkeypatch.setattr(_compile, "_steps", lambda: [lambda: order.append("compile")])
+    import sysid_nn.cli._fit as fit_command
+
+    real_fit = fit_command._fit
+    monkeypatch.setattr(
+        fit_command, "_fit", lambda *a: (order.append("fit"), real_fit(*a))[1]
+    )
+    argv = ["fit", str(tmp_path / "r.csv"), "--input", "excitation", "--output"]
+    argv += ["displacement", "--split-by", "realization", "--hidden", "0"]
+    assert main([*argv, "--save", str(tmp_path / "m.joblib")]) == 0
+    assert order == ["compile", "fit"]
+    assert "compiling the numerical kernels" in capsys.readouterr().err

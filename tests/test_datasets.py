@@ -170,23 +170,82 @@ def test_boucwen_test_signals(tmp_path, capsys):
     assert "Warning" not in capsys.readouterr().out
 
 
+WRITERS = {
+    "Silverbox": (_write_silverbox, datasets.fetch_silverbox),
+    "WienerHammerBenchMark": (_write_wh, datasets.fetch_wiener_hammerstein),
+    "Cascaded_Tanks": (_write_tanks, datasets.fetch_cascaded_tanks),
+    "EMPS": (_write_emps, datasets.fetch_emps),
+    "BoucWen": (_write_boucwen, datasets.fetch_boucwen),
+}
+
+
+@pytest.mark.parametrize("name", [n for n in WRITERS if n != "WienerHammerBenchMark"])
+def test_extracted_files_load_without_the_downloaded_archive(tmp_path, name, capsys):
+    # (Wiener-Hammerstein's one file is its own marker: nothing to remove.)
+    write, fetch = WRITERS[name]
+    write(tmp_path)
+    folder, marker = datasets.MARKERS[name]
+    (tmp_path / folder / marker).unlink()
+    data = fetch(data_home=tmp_path)  # downloading would hit the closed network
+    _check_conventions(data)
+    assert not (tmp_path / folder / marker).exists()
+    assert capsys.readouterr().out == ""
+
+
 def test_missing_files_without_download(tmp_path):
-    with pytest.raises(OSError, match=r"Silverbox/SilverboxFiles\.zip"):
+    (tmp_path / "Silverbox").mkdir()
+    (tmp_path / "Silverbox" / "SilverboxFiles.zip").touch()  # a marker is not enough
+    with pytest.raises(FileNotFoundError) as info:
         datasets.fetch_silverbox(data_home=tmp_path, download_if_missing=False)
+    message = str(info.value)
+    assert str(tmp_path / "Silverbox" / "SilverboxFiles" / "SNLS80mV.mat") in message
+    assert "download_if_missing=True" in message and "\n" not in message
+
+
+def test_offline_download_failure_is_one_sentence(tmp_path, monkeypatch, capsys):
+    def unreachable(*args, **kwargs):
+        raise OSError(101, "Network is unreachable")
+
+    monkeypatch.setattr(socket.socket, "connect", unreachable)
+    monkeypatch.setattr(socket, "create_connection", unreachable)
+    with pytest.raises(ConnectionError) as info:
+        datasets.fetch_cascaded_tanks(data_home=tmp_path)
+    message = str(info.value)
+    assert "\n" not in message
+    expected = tmp_path / "Cascaded_Tanks" / "CascadedTanksFiles" / "dataBenchmark.mat"
+    assert str(expected) in message and "cannot download" in message
+    # No retry chatter on stdout; one line on stderr says what was tried.
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1
+
+
+def test_mistyped_data_home_is_not_created(tmp_path, monkeypatch):
+    typo = tmp_path / "sysid_nn_dta"
+    with pytest.raises(FileNotFoundError, match=r"sysid_nn_dta.*spelling"):
+        datasets.fetch_emps(data_home=typo)
+    assert not typo.exists()
+    monkeypatch.setenv("SYSID_NN_DATA", str(typo))
+    with pytest.raises(FileNotFoundError, match="SYSID_NN_DATA"):
+        datasets.fetch_emps()
+    assert not typo.exists()
 
 
 def test_missing_official_loader_names_the_extra(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "nonlinear_benchmarks", None)
-    with pytest.raises(ImportError, match=r"sysid_nn\[benchmarks\]"):
+    with pytest.raises(ImportError) as info:
         datasets.fetch_emps(data_home=tmp_path)
+    # Right from the package index and from a checkout alike.
+    assert "pip install nonlinear-benchmarks==1.0.1" in str(info.value)
+    assert 'pip install ".[benchmarks]"' in str(info.value)
 
 
 def test_get_data_home(tmp_path, monkeypatch):
     target = tmp_path / "from_env"
+    target.mkdir()
     monkeypatch.setenv("SYSID_NN_DATA", str(target))
     assert datasets.get_data_home() == str(target.resolve())
-    assert target.is_dir()
     explicit = tmp_path / "explicit" / "nested"
+    explicit.mkdir(parents=True)
     assert datasets.get_data_home(explicit) == str(explicit.resolve())
     monkeypatch.delenv("SYSID_NN_DATA")
     monkeypatch.setenv("HOME", str(tmp_path / "home"))

@@ -263,6 +263,7 @@ ROWS_ARE_TIME = "rows are time steps of a recurrence, not independent samples"
         "check_methods_sample_order_invariance": ROWS_ARE_TIME,
     },
 )
+@pytest.mark.filterwarnings("ignore::sysid_nn.DivergenceWarning")  # tiny checks' data
 def test_sklearn_compatible(estimator, check):
     with warnings.catch_warnings():
         # Few iterations on random data: not converging is expected here.
@@ -655,6 +656,7 @@ def test_subspace_start_has_a_stable_one_step_predictor():
     np.testing.assert_allclose(kalman_gain(A_TRUE, C_TRUE, e @ K.T, e), K, atol=0.02)
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 def test_default_start_follows_the_noise_on_the_records():
     def fit(y):
         with warnings.catch_warnings():

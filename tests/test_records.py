@@ -128,6 +128,7 @@ def test_fit_warns_on_records_sampled_far_outside_the_defaults():
         model.fit(Xs[0], ys[0])
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 def test_noise_warning_tells_how_to_decimate_oversampled_records():
     # About 66 samples per period with 1 % noise: decimate by 3 (to 22); the
     # 6400 samples left after the validation tail allow that.

@@ -500,6 +500,32 @@ def test_analyze_residuals_bad_arguments():
         analyze_residuals(FirstOrderARX(), [X], y)
 
 
+def test_analyze_residuals_lags_follow_the_command_line_rule(tmp_path, capsys):
+    from sysid_nn.cli._records import _Records
+    from sysid_nn.cli._validate import _check_max_lag
+
+    rng = np.random.default_rng(21)
+    X, y = arx_data(rng, 30)
+    # 30 samples hold 2 * 10 + 10: ten lags, not 25 (the default).
+    with pytest.raises(ValueError, match=r"max_lag must be between 1 and 10 .* 30"):
+        analyze_residuals(FirstOrderARX(), X, y)
+    report = analyze_residuals(FirstOrderARX(), X, y, max_lag=10)
+    assert (report.summary["n_samples"] == 30).all()
+    # The command line draws the line at the same place.
+    records = _Records({"y": [y]}, origins=["r.csv"])
+    _check_max_lag(10, records)
+    with pytest.raises(ValueError, match="--max-lag 10 or less"):
+        _check_max_lag(11, records)
+    # A skip counts against the record's length.
+    with pytest.raises(ValueError, match="between 1 and 5"):
+        analyze_residuals(FirstOrderARX(), X, y, max_lag=10, skip=10)
+    # Too short for any lag: no advice to use about 25.
+    X, y = arx_data(rng, 11)
+    with pytest.raises(ValueError, match="at least 12 samples") as info:
+        analyze_residuals(FirstOrderARX(), X, y, max_lag=1)
+    assert "25" not in str(info.value)
+
+
 def test_plot_names_the_inputs_by_their_columns():
     import matplotlib.pyplot as plt
 

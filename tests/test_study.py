@@ -284,11 +284,16 @@ def test_verdicts_follow_the_numbers(study):
     summary["whiteness_pass_rate"] = 1.0
     text = " ".join(_verdicts(summary))
     assert "networks as published simulate unseen realisations" in text
-    assert "Some models' one-step residuals pass" in text
     assert "unlike the paper" not in text and "100 %" in text
+    assert "Every model's one-step residuals pass" in text
+    summary.loc[summary["model"] == "linear", "whiteness_pass_rate"] = 0.0
+    assert "Some models' one-step residuals pass" in " ".join(_verdicts(summary))
     # Without the paper's networks there is no comparison with the paper.
+    summary["whiteness_pass_rate"] = 1.0
     text = " ".join(_verdicts(summary.query("model == 'linear'")))
     assert "paper" not in text and "linear (OE) 100 %" in text
+    # One model is one model, not "some models".
+    assert "The model's one-step residuals pass the whiteness test" in text
 
 
 def _study_figures(study, *names):
@@ -336,11 +341,45 @@ def test_figures_carry_units_and_one_model_per_loop(study):
     assert stats.axes[0].get_ylabel().startswith("error [m]")
     shown = [ax for ax in loops.axes if ax.get_visible()]
     data = hysteresis_loops(study.models, study.data, study.evaluation)
-    assert len(shown) == len(data.force) + len(data.state)
+    # Only models with a hidden state: no Bouc-Wen loops drawn for the others.
+    assert data.state and len(shown) == len(data.state)
+    titles = " ".join(ax.get_title() for ax in shown)
+    assert "TDL" not in titles and "linear" not in titles
     for ax in shown:
         assert len(ax.get_legend().get_texts()) == 2  # the truth and one model
         assert ax.get_xlabel() == "displacement X [m]"
         assert ax.get_ylabel().endswith("[m]")
+
+
+def test_long_records_get_an_error_trace_and_a_zoom():
+    import matplotlib.pyplot as plt
+
+    from sysid_nn.study._figures import LONG_RECORD, show_long_record
+
+    t = np.arange(3 * LONG_RECORD) * 0.01
+    measured = np.sin(t)
+    model = measured + 0.01 * np.cos(7 * t)
+    model[2000] += 0.5  # the largest error, where the zoom must look
+    _, ax = plt.subplots()
+    ax.plot(t, measured)
+    inset = show_long_record(ax, t, measured, model, std=np.full(t.size, 0.02))
+    labels = [line.get_label() for line in ax.get_lines()]
+    assert "error (measured - model)" in labels
+    error = ax.get_lines()[-1].get_ydata()
+    np.testing.assert_allclose(error, measured - model)
+    lo, hi = inset.get_lines()[0].get_xdata()[[0, -1]]
+    assert lo <= t[2000] <= hi and hi - lo < 0.1 * t[-1]
+    assert inset.collections  # the band, visible at the zoom's scale
+    plt.close(ax.figure)
+
+
+def test_a_study_without_hidden_states_draws_no_hysteresis(study):
+    from sysid_nn.study._figures import _figures
+
+    linear = {k: m for k, m in study.models.items() if k == "linear"}
+    loops = hysteresis_loops(linear, study.data, study.evaluation)
+    assert not loops.state
+    assert "hysteresis.png" not in _figures(linear, study.data, study.evaluation, loops)
 
 
 def test_pickles_name_the_public_module():

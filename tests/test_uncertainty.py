@@ -335,6 +335,8 @@ def test_cli_validate_draws_and_reports_bands(tmp_path, capsys):
     assert np.all((table["coverage"] > 0.8) & (table["coverage"] < 0.97))
     assert "90 % prediction band of the free run covers" in printed
     assert (out / "band_0.png").exists() and (out / "band_1.png").exists()
+    report = (out / "report.md").read_text()
+    assert "`band.csv`" in report and "`band_<k>.png`" in report
     with pytest.raises(SystemExit):
         main([*argv, "--out", str(out), "--band", "95"])
 
@@ -357,3 +359,19 @@ def test_long_run_variance_of_correlated_residuals(rho):
     expected = (1 + rho) / (1 - rho)
     assert float(meat[0, 0]) / n == pytest.approx(expected, rel=0.15)
     assert L <= 2 if rho == 0 else L > 10
+
+
+def test_interval_coverage_refuses_a_mean_and_std_for_bounds():
+    from sysid_nn.uncertainty import interval_coverage, normal_interval
+
+    rng = np.random.default_rng(3)
+    y = rng.standard_normal(400)
+    mean, std = y + 0.1 * rng.standard_normal(400), np.full(400, 0.1)
+    with pytest.raises(ValueError, match=r"lower exceeds upper.*normal_interval"):
+        interval_coverage(y, mean, std)  # the natural slip for (y, lower, upper)
+    coverage = interval_coverage(y, *normal_interval(mean, std, 0.95))
+    assert 0.9 < coverage <= 1.0
+    # NaN bounds (a diverged run) still count as outside, not as crossed.
+    lower, upper = normal_interval(mean, std, 0.95)
+    lower[:100] = upper[:100] = np.nan
+    assert interval_coverage(y, lower, upper) < 0.76

@@ -9,10 +9,18 @@ that keeps the compiled kernels of *this package only* in a per-user cache
 directory (``~/.cache/sysid_nn/numba`` on Linux, the platform's equivalent
 elsewhere); ``NUMBA_CACHE_DIR``, when set, is respected as numba does. Other
 libraries' numba caching is unchanged.
+
+The cache is keyed by the kernels' source text, not by where the package is
+installed: a regular and an editable install of the same sources share one
+set of compiled kernels, and a change to any kernel module recompiles them
+all (a kernel inlines functions of the other modules, which numba's per-file
+check would miss).
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
 import tempfile
 
@@ -49,6 +57,15 @@ class _UserCacheLocator(_caching._SourceFileBackedLocatorMixin, _caching._CacheL
         return self._cache_path
 
     @classmethod
+    def get_suitable_cache_subpath(cls, py_file) -> str:
+        # One folder wherever the package is installed (numba's default hashes
+        # the install path, so each install would compile its own copy).
+        return "kernels"
+
+    def get_source_stamp(self) -> str:
+        return sources_digest()
+
+    @classmethod
     def from_function(cls, py_func, py_file):
         path = os.path.abspath(py_file)
         if os.path.dirname(path) != _HERE or _numba_config.CACHE_DIR:
@@ -63,6 +80,23 @@ class _UserCacheLocator(_caching._SourceFileBackedLocatorMixin, _caching._CacheL
                 continue
             return locator
         return None
+
+
+@functools.lru_cache(maxsize=1)
+def sources_digest() -> str:
+    """Digest of the text of every kernel module (the cache's freshness key).
+
+    Returns
+    -------
+    str
+        SHA-256 hex digest over the ``.py`` files of this package, in name order.
+    """
+    digest = hashlib.sha256()
+    for name in sorted(os.listdir(_HERE)):
+        if name.endswith(".py"):
+            with open(os.path.join(_HERE, name), "rb") as f:
+                digest.update(name.encode() + b"\0" + f.read())
+    return digest.hexdigest()
 
 
 _TMP: list[str] = []

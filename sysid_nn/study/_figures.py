@@ -51,6 +51,47 @@ def _model_grid(model: StudyModel, n: int, dt: float) -> np.ndarray:
     return np.arange(n) * dt * model.step
 
 
+#: Records longer than this many samples get an error trace and a zoomed inset:
+#: at full length measured and modelled lines overlap into one.
+LONG_RECORD = 1000
+
+
+def show_long_record(ax, t, measured, model, std=None) -> Any:
+    """Add the error trace and a zoom on the largest error to a long record's axes.
+
+    ``std`` (the model's standard deviation) also draws the band in the zoom.
+    Returns the inset axes.
+    """
+    t, measured, model = (np.asarray(a, dtype=float) for a in (t, measured, model))
+    error = measured - model
+    ax.plot(t, error, color="C3", linewidth=0.6, label="error (measured - model)")
+    ax.legend(fontsize=7, loc="lower left")
+    # A window of a twentieth of the record (at least 100 samples) around the
+    # largest finite error.
+    width = max(100, t.size // 20)
+    finite = np.where(np.isfinite(error), np.abs(error), -1.0)
+    centre = int(np.argmax(finite))
+    lo = max(0, min(centre - width // 2, t.size - width))
+    window = slice(lo, lo + width)
+    inset = ax.inset_axes([0.62, 0.62, 0.36, 0.34])
+    if std is not None:
+        std = np.asarray(std, dtype=float)
+        inset.fill_between(
+            t[window],
+            (model - 1.96 * std)[window],
+            (model + 1.96 * std)[window],
+            color="C0",
+            alpha=0.25,
+            linewidth=0,
+        )
+    inset.plot(t[window], measured[window], "k-", linewidth=0.8)
+    inset.plot(t[window], model[window], "--", color="C0", linewidth=0.8)
+    inset.tick_params(labelsize=6)
+    inset.set_title("zoom: largest error", fontsize=7)
+    ax.indicate_inset_zoom(inset, edgecolor="0.4")
+    return inset
+
+
 def _response_figure(models, data, evaluation, mode, title) -> Any:
     from sysid_nn.plotting import plot_response
 
@@ -63,6 +104,8 @@ def _response_figure(models, data, evaluation, mode, title) -> Any:
         t = _model_grid(model, y_k.size, data.dt)
         ylabel = _label(data, field)
         plot_response(t, y_k, y_k - e, label=model.label, ylabel=ylabel, ax=ax)
+        if y_k.size > LONG_RECORD:
+            show_long_record(ax, t, y_k, y_k - e)
         ax.set_title(
             f"{title}: {_panel_title(model, field, data, evaluation)}, "
             f"{_first_record(data)}",
@@ -116,7 +159,9 @@ def _correlation_figure(models, data, evaluation, kind) -> Any:
         f"One-step prediction errors, {_first_record(data)}: lags up to {span:.3g} s"
         + (f" (natural period {period:.3g} s)" if period else "")
         + f";\nshaded: the lags of the tables' tests (up to {evaluation.max_lag} "
-        "samples of each model)",
+        "samples of each model), whose verdicts are chi-square tests over all "
+        "those lags together;\ndotted: the per-lag band, which a few lags leave "
+        "by chance",
         fontsize=9,
     )
     return fig
@@ -211,14 +256,11 @@ def hysteresis_loops(
 def _hysteresis_figure(loops: Bunch, data: Bunch) -> Any:
     from sysid_nn.plotting import plot_hysteresis
 
-    x, g, z = loops.truth
-    unit = data.units["displacement"]
-    force = f"restoring term g = αX + (1-α)Z [{unit}]"
+    # Only models with a hidden state are drawn: the true hysteretic element
+    # evaluated along another model's displacement would show Bouc-Wen loops
+    # that the model itself does not have.
+    x, _, z = loops.truth
     panels = [
-        (f"{label}: g along its free run", "true g", force, g, xy)
-        for label, xy in loops.force.items()
-    ]
-    panels += [
         (
             f"{label}: estimated hidden state, |r| = "
             f"{loops.state_correlation[label]:.2f}",
@@ -245,8 +287,9 @@ def _hysteresis_figure(loops: Bunch, data: Bunch) -> Any:
     for ax in axes[len(panels) :]:
         ax.set_visible(False)
     fig.suptitle(
-        "Hysteresis on test realisation 0: the truth (grey) and each model along "
-        "its own free run; hidden states mapped onto Z by least squares",
+        "Hysteresis on test realisation 0: the true hysteretic state Z (grey) and "
+        "each ISSM's estimated hidden state along its own free run, mapped onto Z "
+        "by least squares",
         fontsize=9,
     )
     return fig
@@ -269,7 +312,8 @@ FIGURES = {
     "fig4_7_simulation_error_statistics.png": (
         "μ_Ns and σ_Ns of simulation errors (fig. 4.7)"
     ),
-    "hysteresis.png": "Hysteresis loops: truth and models' simulations",
+    "hysteresis.png": "Hysteresis: the true hysteretic state and the ISSMs' hidden "
+    "states",
 }
 
 
@@ -308,6 +352,6 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
     }
     if "train" in data:
         builders[names[0]] = training
-    if loops is not None:
+    if loops is not None and loops.state:
         builders[names[7]] = lambda: _hysteresis_figure(loops, data)
     return {name: builders[name] for name in names if name in builders}

@@ -1,9 +1,11 @@
 """Progress of the study's long steps (stderr, off by default).
 
-The study uses only public names of the package, with this one exception:
+The study uses only public names of the package, with two exceptions:
 progress display (``sysid_nn._progress``) is shared with the estimators'
 training progress, so that a terminal gets bars and a log or pipe gets plain
-lines, decided in one place. It is display only, no estimator API.
+lines, decided in one place (display only, no estimator API); and the runs
+compile the kernels first (``sysid_nn._compile``), so that a first run's
+compilation is announced and not booked as fit time.
 """
 
 from __future__ import annotations

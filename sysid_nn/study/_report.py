@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import os
 import platform
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from importlib import metadata
@@ -56,8 +57,17 @@ def _who(row: Any, labels: Mapping[str, str], several: bool) -> str:
     )
 
 
+#: The paper's names of the error statistics, and plain ones for a user's test.
+_STAT_NAMES = {
+    True: ("μ_Ns", "σ_Ns", "N_s", " (eq. 19)", " (eq. 20)"),
+    False: ("mean error", "error std", "records", "", ""),
+}
+
+
 def _glance(
-    summary: pd.DataFrame, labels: Mapping[str, str] | None = None
+    summary: pd.DataFrame,
+    labels: Mapping[str, str] | None = None,
+    paper_terms: bool = True,
 ) -> pd.DataFrame:
     """Rows = models (and outputs), columns = what a reader compares with the paper."""
     labels = labels or {}
@@ -81,11 +91,12 @@ def _glance(
         }
         if linear is not None:
             row["sim. / linear"] = s["nrmse_median"] / linear
+        mu, sigma = _STAT_NAMES[paper_terms][:2]
         row |= {
-            "μ_Ns pred.": p["mu_Ns"],
-            "σ_Ns pred.": p["sigma_Ns"],
-            "μ_Ns sim.": s["mu_Ns"],
-            "σ_Ns sim.": s["sigma_Ns"],
+            f"{mu} pred.": p["mu_Ns"],
+            f"{sigma} pred.": p["sigma_Ns"],
+            f"{mu} sim.": s["mu_Ns"],
+            f"{sigma} sim.": s["sigma_Ns"],
             "white (pred.)": _percent(p["whiteness_pass_rate"]),
             "uncorrelated with input (pred.)": _percent(p["cross_positive_pass_rate"]),
             "diverged (pred./sim.)": (
@@ -97,18 +108,22 @@ def _glance(
 
 
 def _mode_table(
-    summary: pd.DataFrame, mode: str, labels: Mapping[str, str] | None = None
+    summary: pd.DataFrame,
+    mode: str,
+    labels: Mapping[str, str] | None = None,
+    paper_terms: bool = True,
 ) -> pd.DataFrame:
+    mu, sigma, n, eq19, eq20 = _STAT_NAMES[paper_terms]
     cols = {"label": "model"}
     if _several(summary):
         cols["output"] = "output"
     cols |= {
-        "n_realizations": "N_s",
+        "n_realizations": n,
         "nrmse_median": "NRMSE median",
         "nrmse_mean": "NRMSE mean",
         "fit_percent_median": "fit % median",
-        "mu_Ns": "μ_Ns (eq. 19)",
-        "sigma_Ns": "σ_Ns (eq. 20)",
+        "mu_Ns": mu + eq19,
+        "sigma_Ns": sigma + eq20,
         "whiteness_pass_rate": "whiteness passed",
         "cross_positive_pass_rate": "cross τ>0 passed",
         "cross_negative_pass_rate": "cross τ<0 passed",
@@ -148,6 +163,17 @@ def _machine() -> str:
         f"{os.cpu_count()} logical CPUs ({platform.machine()})"
     )
 
+
+#: Which residual test the verdicts are, and how it differs from the figures.
+_TEST_NAMES = (
+    "Which tests: *whiteness* is the portmanteau (Box-Pierce) chi-square test "
+    "of the residual autocorrelation over lags {lags} together; *uncorrelated "
+    "with input* the chi-square test of the residual-input cross-correlation "
+    "over the same positive lags. The correlation figures draw the per-lag "
+    "{level} % band (dotted): a few lags outside it are expected by chance (about "
+    "1 in 20) and do not fail the chi-square test, and many lags inside it but "
+    "away from zero can."
+)
 
 # Where the user guide explains the verdicts below.
 _PITFALLS = (
@@ -197,12 +223,24 @@ def _verdicts(
         f"{_who(r, labels or {}, several)} {_percent(r.whiteness_pass_rate)}"
         for r in pred.itertuples()
     )
-    if rates.max() == 0:
+    if summary["model"].nunique() == 1:
+        if rates.max() == 0:
+            head = "The model's one-step residuals do not pass the whiteness test"
+        elif rates.max() < 0.5:
+            head = (
+                "The model's one-step residuals do not pass the whiteness test on "
+                f"most {records}"
+            )
+        else:
+            head = "The model's one-step residuals pass the whiteness test"
+    elif rates.max() == 0:
         head = "No model's one-step residuals pass the whiteness test"
     elif rates.max() < 0.5:
         head = (
-            "No model's one-step residuals pass the whiteness test on most realisations"
+            f"No model's one-step residuals pass the whiteness test on most {records}"
         )
+    elif rates.min() >= 0.5:
+        head = "Every model's one-step residuals pass the whiteness test"
     else:
         head = "Some models' one-step residuals pass the whiteness test"
     text = f"**{head}** (share of the {n} {records}: {listed})"
@@ -254,6 +292,9 @@ def write_report(
     output_labels: Mapping[str, str] | None = None,
     alpha: float = 0.05,
     records: str = "test realisations",
+    max_lag: int | None = None,
+    paper_terms: bool = True,
+    files: Mapping[str, str] | None = None,
 ) -> None:
     """Write ``report.md``: verdicts, setup, tables laid out as the paper's figures.
 
@@ -285,6 +326,16 @@ def write_report(
         Significance level of the residual tests in ``summary``.
     records : str, default="test realisations"
         What the evaluated records are called in the text.
+    max_lag : int, optional
+        Largest lag of the residual tests, named where the report explains
+        them.
+    paper_terms : bool, default=True
+        Name sections, statistics and figures as the paper does (section,
+        equation and figure numbers, ``μ_Ns``); False for a report on the
+        user's own records, in plain words.
+    files : dict of str to str, optional
+        Further files next to the report, name to description, listed with
+        the others.
 
     Examples
     --------
@@ -323,7 +374,7 @@ def write_report(
     lines += ["## Results at a glance", ""]
     labels = dict(output_labels or {})
     named = [labels.get(f, f) for f in dict.fromkeys(summary["output"])]
-    glance = _glance(summary, labels)
+    glance = _glance(summary, labels, paper_terms)
     lines += [f"- {line}" for line in _verdicts(summary, labels, records)] + [""]
     lines += [_md_table(glance), ""]
     whose = "its" if len(named) == 1 else "each output's"
@@ -337,9 +388,21 @@ def write_report(
             if "sim. / linear" in glance
             else ""
         )
-        + f". μ_Ns and σ_Ns (eq. 19-20) are in {units}, averaged over the "
-        f"N_s {records} as in figs 4.5 and 4.7. Residual tests at the "
-        f"{100 * (1 - alpha):g} % level on each of the {records} (figs 4.3-4.4).",
+        + (
+            f". μ_Ns and σ_Ns (eq. 19-20) are in {units}, averaged over the "
+            f"N_s {records} as in figs 4.5 and 4.7. Residual tests at the "
+            f"{100 * (1 - alpha):g} % level on each of the {records} (figs 4.3-4.4)."
+            if paper_terms
+            else f". Mean error and error std are in {units}: the mean and the "
+            f"standard deviation of each record's errors, averaged over the "
+            f"{records}. Residual tests at the {100 * (1 - alpha):g} % level on "
+            f"each of the {records}."
+        ),
+        "",
+        _TEST_NAMES.format(
+            lags=f"1 to {max_lag}" if max_lag else "1 to max_lag",
+            level=f"{100 * (1 - alpha):g}",
+        ),
         "",
     ]
     if "issm_paper" in models or "tdl_paper" in models:
@@ -361,12 +424,14 @@ def write_report(
         ("One-step prediction (section 4.3)", "prediction", [1, 2, 3, 4]),
         ("Free-run simulation (section 4.4)", "simulation", [5, 6]),
     ):
-        table = _mode_table(summary, mode, labels)
+        if not paper_terms:
+            heading = heading.split(" (")[0]
+        table = _mode_table(summary, mode, labels, paper_terms)
         lines += [f"## {heading}", "", _md_table(table), ""]
         for i in figs:
             name = list(FIGURES)[i]
             if name in has:
-                lines += [f"![{FIGURES[name]}]({name})", ""]
+                lines += [f"![{_caption(name, paper_terms)}]({name})", ""]
         if mode == "simulation":
             lines += [
                 "Free-run residuals are coloured even for a good simulator (they "
@@ -381,8 +446,15 @@ def write_report(
     lines += [
         "- `summary.csv`: one row per model, scored output and mode (the tables)."
     ]
-    lines += [f"- `{name}`: {FIGURES[name]}" for name in figures]
+    lines += [f"- `{name}`: {_caption(name, paper_terms)}" for name in figures]
+    lines += [f"- `{name}`: {about}" for name, about in (files or {}).items()]
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _caption(name: str, paper_terms: bool) -> str:
+    """A figure's caption; without the paper's figure number for a user's test."""
+    caption = FIGURES[name]
+    return caption if paper_terms else re.sub(r" \(figs?\. [^)]*\)", "", caption)
 
 
 def _parallel_line(config: StudyConfig, scheduler: str | None) -> str:
@@ -436,7 +508,9 @@ def _study_setup(
 
 
 def _hysteresis_lines(loops: Bunch) -> list[str]:
-    lines = ["![Hysteresis loops](hysteresis.png)", ""]
+    if not loops.state:
+        return ["No model has a hidden state to compare with the hysteretic one."]
+    lines = ["![Hysteresis](hysteresis.png)", ""]
     if loops.state_correlation:
         lines.append(
             "Estimated unmeasured ISSM states against the true hysteretic Z "
@@ -446,10 +520,11 @@ def _hysteresis_lines(loops: Bunch) -> list[str]:
             )
             + "."
         )
-    lines.append(
-        "One panel per model: the restoring term g = αX + (1-α)Z (eq. 14) that "
-        "the true hysteretic element (eq. 15) develops along the model's "
-        "simulated displacement, over the truth in grey; one panel per ISSM for "
-        "its estimated hidden state against its simulated displacement."
-    )
+    if loops.state:
+        lines.append(
+            "One panel per ISSM: its estimated hidden state against its simulated "
+            "displacement, over the true hysteretic state in grey. Models without "
+            "a hidden state (the TDLs, the linear model) have no hysteretic "
+            "state to draw."
+        )
     return lines

@@ -17,9 +17,16 @@ import pandas as pd
 from joblib import parallel_backend
 from sklearn.utils import Bunch
 
+from sysid_nn._compile import prepare_kernels
 from sysid_nn.study._config import StudyConfig
 from sysid_nn.study._data import generate_data
-from sysid_nn.study._figures import _figures, _label, hysteresis_loops
+from sysid_nn.study._figures import (
+    LONG_RECORD,
+    _figures,
+    _label,
+    hysteresis_loops,
+    show_long_record,
+)
 from sysid_nn.study._models import StudyModel, fit_models
 from sysid_nn.study._progress import _progress
 from sysid_nn.study._report import (
@@ -97,10 +104,14 @@ def _write_outputs(
     evaluation: Bunch,
     loops: Bunch | None,
     progress: bool,
+    renamed: Mapping[str, str] | None = None,
 ) -> tuple[pd.DataFrame, list[str]]:
     summary = summarize(evaluation, models)
-    evaluation.results.to_csv(tmp / "results.csv", index=False)
-    summary.to_csv(tmp / "summary.csv", index=False)
+    # A user's records are records, not realisations of the study's process.
+    evaluation.results.rename(columns=renamed or {}).to_csv(
+        tmp / "results.csv", index=False
+    )
+    summary.rename(columns=renamed or {}).to_csv(tmp / "summary.csv", index=False)
     builders = _figures(models, data, evaluation, loops)
     for name, build in _progress(builders.items(), len(builders), "figures", progress):
         build().savefig(tmp / name, dpi=90)
@@ -178,6 +189,11 @@ def run_study(
         yield
         timings[step] = time.perf_counter() - start
 
+    # Compiling the kernels on a first run is announced, and timed apart from
+    # the fits (it is not their cost).
+    compile_seconds = prepare_kernels(show=progress)
+    if compile_seconds:
+        timings["kernel compilation (first run only)"] = compile_seconds
     with _staged_directory(out_dir, overwrite) as tmp:
         with _joblib_backend(scheduler):
             with timed("generate"):
@@ -201,6 +217,7 @@ def run_study(
             extra={"Hysteresis": _hysteresis_lines(loops)},
             output_labels=_output_labels(data, evaluation),
             alpha=config.alpha,
+            max_lag=config.max_lag,
         )
     return Bunch(
         out_dir=Path(out_dir),
@@ -226,6 +243,8 @@ def run_validation(
     units: Mapping[str, str] | None = None,
     setup: Sequence[str] = (),
     progress: bool = False,
+    series: str | None = "csv",
+    band: float | None = None,
 ) -> Bunch:
     """Validate a fitted model on measured records: the study's report on them.
 
@@ -259,11 +278,22 @@ def run_validation(
         Extra lines for the report's setup section (e.g. file names).
     progress : bool, default=False
         Progress bars on stderr.
+    series : {"csv", "parquet"} or None, default="csv"
+        Also write the records with the model's one-step predictions and
+        free runs, ``series.csv`` or ``series.parquet`` (needs pyarrow):
+        one row per sample with ``record``, ``t`` (s), the inputs and, per
+        output ``y``, the columns ``y``, ``y_predicted`` and ``y_simulated``.
+    band : float, optional
+        Also draw each record's free run with its prediction band at this
+        level (e.g. 0.95), ``band_<k>.png``, and write the share of samples
+        inside it per record, ``band.csv``.
 
     Returns
     -------
     Bunch
-        ``out_dir``, ``results``, ``summary``, ``evaluation``.
+        ``out_dir``, ``results``, ``summary``, ``evaluation``, ``series``
+        (the series' DataFrame, or None) and ``band_coverage`` (the pooled
+        share of samples inside the band, or None).
 
     Examples
     --------
@@ -280,7 +310,7 @@ def run_validation(
     >>> report = run_validation(model, records, out, dt=0.01, max_lag=10,
     ...                         units={"force": "m/s²", "x": "m"})
     >>> sorted(p.name for p in out.glob("*.csv"))
-    ['results.csv', 'summary.csv']
+    ['results.csv', 'series.csv', 'summary.csv']
     """
     # The residual tests' lags are checked against these records, not the study's.
     shortest = min(len(x) for x in records[model.inputs[0]])
@@ -291,15 +321,45 @@ def run_validation(
         n_samples=shortest,
         paper_tdl_step=model.step,
     )
-    models = {"model": model}
+    if series not in ("csv", "parquet", None):
+        raise ValueError(f"series must be 'csv', 'parquet' or None; got {series!r}.")
+    if series == "parquet":
+        _check_parquet()
+    models = {model.label: model}
     data = Bunch(
         test=records, dt=float(dt), units=dict(units or {}), record_name="record"
     )
+    prepare_kernels(show=progress)
     with _staged_directory(out_dir, overwrite) as tmp:
         evaluation = evaluate(
             models, data, config, outputs=model.outputs, progress=progress
         )
-        summary, figures = _write_outputs(tmp, models, data, evaluation, None, progress)
+        renamed = {"realization": "record", "n_realizations": "n_records"}
+        summary, figures = _write_outputs(
+            tmp, models, data, evaluation, None, progress, renamed
+        )
+        files = {}
+        table = coverage = None
+        if series is not None:
+            table = _series(model, records, evaluation, float(dt))
+            if series == "csv":
+                table.to_csv(tmp / "series.csv", index=False)
+            else:
+                table.to_parquet(tmp / "series.parquet", index=False)
+            files[f"series.{series}"] = (
+                "every record with the model's one-step predictions "
+                "(`<output>_predicted`) and free runs (`<output>_simulated`)."
+            )
+        if band is not None:
+            coverage = _write_bands(model, records, tmp, float(dt), band)
+            files["band.csv"] = (
+                f"share of samples inside the {100 * band:g} % prediction band of "
+                f"the free run, per record (pooled: {100 * coverage:.1f} %)."
+            )
+            files["band_<k>.png"] = (
+                "free run of record k with its prediction band, over the "
+                "measured response."
+            )
         n = summary["n_realizations"].iloc[0]
         write_report(
             tmp / "report.md",
@@ -317,10 +377,78 @@ def run_validation(
             output_labels=_output_labels(data, evaluation),
             alpha=alpha,
             records="records",
+            max_lag=max_lag,
+            paper_terms=False,
+            files=files,
         )
     return Bunch(
         out_dir=Path(out_dir),
         results=evaluation.results,
         summary=summary,
         evaluation=evaluation,
+        series=table,
+        band_coverage=coverage,
     )
+
+
+def _write_bands(model, records, out: Path, dt: float, level: float) -> float:
+    """Free runs with their prediction bands: figures, band.csv, pooled coverage."""
+    import matplotlib.pyplot as plt
+
+    from sysid_nn.plotting import plot_band
+    from sysid_nn.uncertainty import interval_coverage, normal_interval
+
+    X, y = model.arrays(records)
+    mean, std = model.estimator.simulate(X, return_std=True)
+    rows, bounds = [], []
+    for k, (yk, mk, sk) in enumerate(zip(y, mean, std, strict=True)):
+        yk, mk, sk = (np.reshape(a, (len(a), -1)) for a in (yk, mk, sk))
+        lower, upper = normal_interval(mk, sk, level)
+        bounds.append((yk, lower, upper))
+        rows.append({"record": k, "coverage": interval_coverage(yk, lower, upper)})
+        t = dt * model.step * np.arange(len(yk))
+        ax = plot_band(t, mk[:, 0], sk[:, 0], level=level, label="simulated")
+        ax.plot(t, yk[:, 0], "k-", linewidth=0.6, label="measured")
+        ax.set_xlabel("time [s]")
+        ax.set_ylabel(model.outputs[0])
+        ax.legend()
+        if len(yk) > LONG_RECORD:
+            show_long_record(ax, t, yk[:, 0], mk[:, 0], sk[:, 0])
+        ax.figure.savefig(out / f"band_{k}.png", dpi=90)
+        plt.close(ax.figure)
+    pd.DataFrame(rows).to_csv(out / "band.csv", index=False)
+    return interval_coverage(*(list(b) for b in zip(*bounds, strict=True)))
+
+
+def _check_parquet() -> None:
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        raise ImportError(
+            "series='parquet' needs pyarrow (pip install pyarrow); or write CSV."
+        ) from None
+
+
+_SERIES_MODES = (("prediction", "predicted"), ("simulation", "simulated"))
+
+
+def _series(
+    model: StudyModel, records: Mapping[str, Sequence[np.ndarray]], evaluation, dt
+) -> pd.DataFrame:
+    """Every record with the model's one-step predictions and free runs."""
+    frames = []
+    for j in range(len(records[model.inputs[0]])):
+        (X,), (y,) = model.arrays(records, [j])
+        y = y.reshape(len(y), -1)
+        columns = {"record": j, "t": dt * model.step * np.arange(len(y))}
+        columns |= {f: X[:, i] for i, f in enumerate(model.inputs)}
+        for k, field in enumerate(model.outputs):
+            columns[field] = y[:, k]
+            for mode, suffix in (
+                ("prediction", "predicted"),
+                ("simulation", "simulated"),
+            ):
+                e = evaluation.errors[model.label, mode, field][j]
+                columns[f"{field}_{suffix}"] = y[:, k] - np.reshape(e, len(y))
+        frames.append(pd.DataFrame(columns))
+    return pd.concat(frames, ignore_index=True)
