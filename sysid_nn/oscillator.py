@@ -639,8 +639,16 @@ def _calibrate(
         peak = float(np.mean(np.max(np.abs(disp), axis=1)))
         return math.log(peak / target) if peak > 0 else -math.inf
 
-    # Bracket around the linear-scaling estimate (peak proportional to r0).
-    lo = hi = math.log(target / (target * math.exp(log_ratio(0.0))))
+    return _solve_log_scale(log_ratio)
+
+
+def _solve_log_scale(log_ratio) -> float:
+    """Scale ``r0`` where ``log_ratio(log r0) = log(mean peak / target)`` is 0.
+
+    Brackets the root around the linear-scaling estimate (peak proportional
+    to ``r0``), then refines it with Brent's method.
+    """
+    lo = hi = -log_ratio(0.0)
     h_lo = h_hi = log_ratio(lo)
     for _ in range(60):
         if h_lo <= 0 <= h_hi:
