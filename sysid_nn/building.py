@@ -87,7 +87,7 @@ class ShearBuilding(BaseEstimator):
     :class:`~sysid_nn.oscillator.HystereticOscillator` with ``F = -a_g``.
 
     The defaults give a three-storey frame with equal floors and storeys,
-    fundamental frequency 1.42 Hz (higher modes 3.97 and 5.73 Hz), 2 %
+    fundamental frequency 1.42 Hz (higher modes 3.97 and 5.74 Hz), 2 %
     damping in every mode, and a post-yield stiffness of 10 %. The ground
     motion of :meth:`generate` is the oscillator's (see
     :func:`sysid_nn.excitation.paper_excitation`) with strength ``r0``
@@ -145,7 +145,7 @@ class ShearBuilding(BaseEstimator):
     (2, 1000, 3)
     >>> modes = building.modal_properties()
     >>> modes.frequency.round(2), modes.linear_order
-    (array([1.42, 3.97, 5.73]), 6)
+    (array([1.42, 3.97, 5.74]), 6)
     """
 
     def __init__(
