@@ -363,9 +363,12 @@ def _write_markdown(rows: list[dict]) -> None:
         "GRU recipe (one GRU layer of 100 units, input only, L1 loss, Adam "
         "3e-3, flat-then-cosine schedule, windows of 200 samples, the first 50 "
         "out of the loss), its test error logged after every epoch, on one "
-        "pinned core. Toolbox: the estimators' defaults (`random_state=0`). "
-        "Both train on the first four fifths of the official training record "
-        "and validate on its last fifth (`bench_field.py --validation split`). "
+        "pinned core, trained on the first four fifths of the official "
+        "training record and validated on its last fifth (the split of "
+        "`bench_field.py --validation split`). Toolbox: the estimators' "
+        "defaults (`random_state=0`); rows read from `results_field_split.csv` "
+        "used the same split, rows from `results_field.csv` the whole record "
+        "with the estimators' own held-out tail. "
         f"Written by `benchmarks/bench_peer.py` ({platform.machine()}, "
         f"Python {platform.python_version()}).",
         "",
