@@ -92,6 +92,14 @@ PEER_LABEL = "tsfast GRU-100"
 
 
 # --------------------------------------------------------------- the toolbox side
+def _read_csv(path: Path) -> list[dict]:
+    """Rows of a results file; none if it does not exist yet."""
+    if not path.is_file():
+        return []
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
 def _split(benchmark: str, data_home: str | None):
     """Training, validation and test records of ``bench_field --validation split``."""
     from bench_field import BENCHMARKS
@@ -178,14 +186,11 @@ def read_ours(benchmark: str, model_names: list[str]) -> list[dict]:
     from bench_field import MODELS
 
     for path in (FIELD_SPLIT_CSV, FIELD_CSV):
-        if not path.is_file():
-            continue
-        with path.open(newline="") as f:
-            stored = [
-                r
-                for r in csv.DictReader(f)
-                if r["benchmark"] == benchmark and r["model"] in model_names
-            ]
+        stored = [
+            r
+            for r in _read_csv(path)
+            if r["benchmark"] == benchmark and r["model"] in model_names
+        ]
         if stored:
             break
     else:
@@ -324,17 +329,10 @@ def worker(npz: str, out: str, epochs: int, max_batches: int | None) -> None:
 
 
 # --------------------------------------------------------------- results
-def _load_rows() -> list[dict]:
-    if not CSV.is_file():
-        return []
-    with CSV.open(newline="") as f:
-        return list(csv.DictReader(f))
-
-
 def _store(rows: list[dict]) -> None:
     """Replace the stored rows of the same benchmark and model; rebuild the table."""
     keep = {(r["benchmark"], r["model"]) for r in rows}
-    old = [r for r in _load_rows() if (r["benchmark"], r["model"]) not in keep]
+    old = [r for r in _read_csv(CSV) if (r["benchmark"], r["model"]) not in keep]
     merged = sorted(
         [*old, *rows],
         key=lambda r: (

@@ -18,7 +18,6 @@ import numpy as np
 import pandas as pd
 import scipy.linalg
 from numpy.typing import ArrayLike
-from sklearn.base import BaseEstimator
 from sklearn.utils import Bunch, check_random_state
 
 from sysid_nn import excitation as _exc
@@ -31,7 +30,7 @@ from sysid_nn._validation import (
     check_positive_int,
     check_real,
 )
-from sysid_nn.oscillator import _solve_log_scale
+from sysid_nn.oscillator import _GroundMotionStructure
 
 __all__ = ["ShearBuilding"]
 
@@ -46,10 +45,9 @@ _CAL_SEED = 0
 _CAL_TARGET = 2.0
 
 _STOREY = ("mass", "stiffness", "alpha", "beta", "gamma", "n", "z0")
-_EXCITATION = ("zeta_s", "omega_s", "t1", "t2")
 
 
-class ShearBuilding(BaseEstimator):
+class ShearBuilding(_GroundMotionStructure):
     """Shear building with a Bouc-Wen hysteretic spring in every storey.
 
     Floor ``i = 1..N`` (``N = n_storeys``, floor 1 the lowest) has mass
@@ -240,15 +238,6 @@ class ShearBuilding(BaseEstimator):
             lambda v, nm: check_in_range(v, nm, 0.0, 1.0, closed=(True, False)),
         )
 
-    def _excitation_params(self) -> dict[str, float]:
-        t1, t2 = _exc._check_t1_t2(self.t1, self.t2)
-        return {
-            "zeta_s": check_positive(self.zeta_s, "zeta_s"),
-            "omega_s": check_positive(self.omega_s, "omega_s"),
-            "t1": t1,
-            "t2": t2,
-        }
-
     # ---------------------------------------------------------- linear model
     def modal_properties(self) -> Bunch:
         """Linear (pre-yield) matrices, natural frequencies and mode shapes.
@@ -373,7 +362,7 @@ class ShearBuilding(BaseEstimator):
         names = self._outputs(outputs)
         p = self._storey_params()
         modes = self.modal_properties()
-        n_sub = check_positive_int(self.n_substeps, "n_substeps")
+        n_sub = self._substeps()
         n = len(p["mass"])
         rows = np.atleast_2d(ground)
         n_real = rows.shape[0]
@@ -419,13 +408,17 @@ class ShearBuilding(BaseEstimator):
     # ------------------------------------------------------------- calibration
     def _calibration_key(self) -> tuple:
         p = self._storey_params()
-        e = self._excitation_params()
         return (
             self.modal_properties().damping_matrix.tobytes(),
             tuple(tuple(p[k]) for k in _STOREY),
-            tuple(e[k] for k in _EXCITATION),
-            check_positive_int(self.n_substeps, "n_substeps"),
         )
+
+    def _mean_peak(self, force: np.ndarray, dt: float) -> float:
+        # The mean over records of the peak storey ductility; the ground
+        # acceleration is -F, as in generate.
+        drift = self.simulate(-force, dt, outputs="drift").drift
+        z0 = self._storey_params()["z0"]
+        return float(np.mean(np.max(np.abs(drift) / z0, axis=(1, 2))))
 
     def calibrate_r0(
         self,
@@ -473,32 +466,13 @@ class ShearBuilding(BaseEstimator):
         >>> round(ShearBuilding().calibrate_r0(n_realizations=20), 3)
         0.159
         """
-        n_realizations = check_positive_int(n_realizations, "n_realizations")
-        n_samples = check_positive_int(n_samples, "n_samples")
-        dt = check_positive(dt, "dt")
-        target = check_positive(target, "target")
-        if isinstance(random_state, numbers.Integral) and not isinstance(
-            random_state, bool
-        ):
-            return _calibrate_cached(
-                self._calibration_key(),
-                self,
-                n_realizations,
-                n_samples,
-                dt,
-                target,
-                int(random_state),
-            )
-        return _calibrate(self, n_realizations, n_samples, dt, target, random_state)
-
-    def _resolved_r0(self) -> float:
-        if isinstance(self.r0, str):
-            if self.r0 != "calibrate":
-                raise ValueError(
-                    f"r0 must be 'calibrate' or a non-negative float, got {self.r0!r}."
-                )
-            return self.calibrate_r0()
-        return check_positive(self.r0, "r0", allow_zero=True)
+        return self._calibrated_r0(
+            n_realizations=n_realizations,
+            n_samples=n_samples,
+            dt=dt,
+            target=target,
+            random_state=random_state,
+        )
 
     # -------------------------------------------------------------- generation
     def generate(
@@ -593,53 +567,3 @@ def _frame(rec: Bunch, names: tuple[str, ...]) -> pd.DataFrame:
         for i in range(values.shape[1]):
             columns[f"{name}_{i + 1}"] = values[:, i]
     return pd.DataFrame(columns)
-
-
-def _calibrate(
-    building: ShearBuilding,
-    n_realizations: int,
-    n_samples: int,
-    dt: float,
-    target: float,
-    random_state: int | np.random.RandomState | None,
-) -> float:
-    """Common-random-numbers solve of mean peak ductility = target for r0."""
-    unit_ground = -_exc.paper_excitation(
-        n_samples,
-        dt,
-        r0=1.0,
-        n_realizations=n_realizations,
-        random_state=random_state,
-        **building._excitation_params(),
-    )
-    z0 = building._storey_params()["z0"]
-
-    def log_ratio(log_r0: float) -> float:
-        res = building.simulate(math.exp(log_r0) * unit_ground, dt, outputs="drift")
-        peak = float(np.mean(np.max(np.abs(res.drift) / z0, axis=(1, 2))))
-        return math.log(peak / target) if peak > 0 else -math.inf
-
-    return _solve_log_scale(log_ratio)
-
-
-#: Calibrations for integer seeds, keyed by everything they depend on.
-_CALIBRATED: dict[tuple, float] = {}
-
-
-def _calibrate_cached(
-    key: tuple,
-    building: ShearBuilding,
-    n_realizations: int,
-    n_samples: int,
-    dt: float,
-    target: float,
-    seed: int,
-) -> float:
-    # A scikit-learn estimator hashes by identity, so the cache is keyed by
-    # the parameter values instead of the building.
-    full_key = (key, n_realizations, n_samples, dt, target, seed)
-    if full_key not in _CALIBRATED:
-        _CALIBRATED[full_key] = _calibrate(
-            building, n_realizations, n_samples, dt, target, seed
-        )
-    return _CALIBRATED[full_key]

@@ -26,22 +26,22 @@ def _floor_forces(x, z, k_lin, k_hys, out):
 
 
 @njit(cache=True, error_model="numpy")
-def _rhs(
-    x, v, z, ag, inv_mass, damping, k_lin, k_hys, beta_s, gamma_s, nexp, dx, dv, dz
-):
-    # Relative coordinates: M x'' + C x' + f_s(x, z) = -M 1 a_g.
+def _rhs(y, ag, p, dy):
+    # y = (x, v, z) as rows; relative coordinates: M x'' + C x' + f_s = -M 1 a_g.
+    # p = (inv_mass, damping, k_lin, k_hys, beta_s, gamma_s, nexp).
+    inv_mass, damping, k_lin, k_hys, beta_s, gamma_s, nexp = p
+    x, v, z = y[0], y[1], y[2]
     n = x.shape[0]
-    _floor_forces(x, z, k_lin, k_hys, dv)
+    _floor_forces(x, z, k_lin, k_hys, dy[1])
     for i in range(n):
         cv = 0.0
         for j in range(n):
             cv += damping[i, j] * v[j]
-        dv[i] = -(cv + dv[i]) * inv_mass[i] - ag
-        dx[i] = v[i]
+        dy[1, i] = -(cv + dy[1, i]) * inv_mass[i] - ag
+        dy[0, i] = v[i]
         drift_rate = v[i] - (v[i - 1] if i > 0 else 0.0)
-        dz[i] = _hysteretic_slope(z[i], drift_rate, beta_s[i], gamma_s[i], nexp[i]) * (
-            drift_rate
-        )
+        slope = _hysteretic_slope(z[i], drift_rate, beta_s[i], gamma_s[i], nexp[i])
+        dy[2, i] = slope * drift_rate
 
 
 @njit(cache=True, error_model="numpy")
@@ -72,101 +72,41 @@ def simulate_shear_building(
     """
     n_real, n_samp = ground.shape
     n = inv_mass.shape[0]
-    disp = np.empty((n_real, n_samp, n))
-    vel = np.empty((n_real, n_samp, n))
-    hyst = np.empty((n_real, n_samp, n))
+    p = (inv_mass, damping, k_lin, k_hys, beta_s, gamma_s, nexp)
+    out = np.empty((3, n_real, n_samp, n))  # x, v, z at the samples
     acc = np.empty((n_real, n_samp, n))
     h = dt / n_substeps
-    hh = 0.5 * h
-    x = np.empty(n)
-    v = np.empty(n)
-    z = np.empty(n)
-    xs = np.empty(n)
-    vs = np.empty(n)
-    zs = np.empty(n)
-    k = np.zeros((4, 3, n))  # RK4 stages of (x, v, z); stage 0 reads 0 * k[0]
+    # RK4: stage c is evaluated at y + offset[c] * k[c - 1], weighted by weight[c].
+    offset = np.array([0.0, 0.5 * h, 0.5 * h, h])
+    weight = np.array([h / 6.0, h / 3.0, h / 3.0, h / 6.0])
+    y = np.empty((3, n))
+    ys = np.empty((3, n))
+    k = np.zeros((4, 3, n))
+    dy = np.empty((3, n))
     for r in range(n_real):
-        x[:] = state0[r, :n]
-        v[:] = state0[r, n : 2 * n]
-        z[:] = state0[r, 2 * n :]
+        for c in range(3):
+            y[c] = state0[r, c * n : (c + 1) * n]
         for s in range(n_samp):
-            disp[r, s] = x
-            vel[r, s] = v
-            hyst[r, s] = z
+            out[:, r, s] = y
             # The absolute acceleration x'' + a_g does not depend on a_g.
-            _rhs(
-                x,
-                v,
-                z,
-                0.0,
-                inv_mass,
-                damping,
-                k_lin,
-                k_hys,
-                beta_s,
-                gamma_s,
-                nexp,
-                xs,
-                acc[r, s],
-                zs,
-            )
+            _rhs(y, 0.0, p, dy)
+            acc[r, s] = dy[1]
             if s == n_samp - 1:
                 break  # ground[r, -1] only acts after the last recorded sample
             ag = ground[r, s]
             for _ in range(n_substeps):
                 for stage in range(4):
-                    # Stage 0 at the step's start, 1 and 2 at its middle, 3 at its end.
-                    step = 0.0 if stage == 0 else (h if stage == 3 else hh)
-                    prev = max(stage - 1, 0)
+                    prev = max(stage - 1, 0)  # stage 0: offset 0
+                    for c in range(3):
+                        for i in range(n):
+                            ys[c, i] = y[c, i] + offset[stage] * k[prev, c, i]
+                    _rhs(ys, ag, p, k[stage])
+                for c in range(3):
                     for i in range(n):
-                        xs[i] = x[i] + step * k[prev, 0, i]
-                        vs[i] = v[i] + step * k[prev, 1, i]
-                        zs[i] = z[i] + step * k[prev, 2, i]
-                    _rhs(
-                        xs,
-                        vs,
-                        zs,
-                        ag,
-                        inv_mass,
-                        damping,
-                        k_lin,
-                        k_hys,
-                        beta_s,
-                        gamma_s,
-                        nexp,
-                        k[stage, 0],
-                        k[stage, 1],
-                        k[stage, 2],
-                    )
-                for i in range(n):
-                    x[i] += (
-                        h
-                        / 6.0
-                        * (
-                            k[0, 0, i]
-                            + 2.0 * k[1, 0, i]
-                            + 2.0 * k[2, 0, i]
-                            + k[3, 0, i]
+                        y[c, i] += (
+                            weight[0] * k[0, c, i]
+                            + weight[1] * k[1, c, i]
+                            + weight[2] * k[2, c, i]
+                            + weight[3] * k[3, c, i]
                         )
-                    )
-                    v[i] += (
-                        h
-                        / 6.0
-                        * (
-                            k[0, 1, i]
-                            + 2.0 * k[1, 1, i]
-                            + 2.0 * k[2, 1, i]
-                            + k[3, 1, i]
-                        )
-                    )
-                    z[i] += (
-                        h
-                        / 6.0
-                        * (
-                            k[0, 2, i]
-                            + 2.0 * k[1, 2, i]
-                            + 2.0 * k[2, 2, i]
-                            + k[3, 2, i]
-                        )
-                    )
-    return disp, vel, hyst, acc
+    return out[0], out[1], out[2], acc
