@@ -1,8 +1,11 @@
 """Tests of the multi-storey shear building and its data generator."""
 
+import pickle
+
 import numpy as np
 import pytest
 import scipy.signal
+from sklearn.base import clone
 
 from sysid_nn import HystereticOscillator, ShearBuilding
 from sysid_nn.excitation import paper_excitation
@@ -295,6 +298,16 @@ def test_generate_calibrates_when_asked():
     assert rec.r0 == r0
     rec_fixed = building.set_params(r0=r0).generate(1, n_samples=100, random_state=0)
     np.testing.assert_array_equal(rec.acceleration, rec_fixed.acceleration)
+
+
+def test_clone_and_pickle_keep_per_storey_parameters():
+    building = ShearBuilding(n_storeys=2, mass=[2.0, 1.0], alpha=[0.1, 0.5], r0=0.1)
+    ground = -paper_excitation(300, DT, r0=0.1, random_state=0)
+    expected = building.simulate(ground, DT).acceleration
+    for copy in (clone(building), pickle.loads(pickle.dumps(building))):
+        np.testing.assert_array_equal(copy.simulate(ground, DT).acceleration, expected)
+    taller = clone(building).set_params(n_storeys=4, mass=1.0, alpha=0.1)
+    assert taller.simulate(ground, DT).acceleration.shape == (300, 4)
 
 
 # ---------------------------------------------------------- validation
