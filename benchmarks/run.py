@@ -9,6 +9,8 @@ Usage::
 Each script prints its own table and writes its results next to itself;
 this runner only executes them in one process tree, one after another, so
 that ratios quoted from one run are measured on the same machine state.
+``bench_peer.py`` is not run here: it trains a peer library's model in an
+environment of its own (see its docstring for the command).
 """
 
 from __future__ import annotations
@@ -19,15 +21,23 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+#: Scripts that need an environment of their own, with the reason.
+SEPARATE = {
+    "bench_peer.py": "it needs the peer library's own environment; run "
+    "`python benchmarks/bench_peer.py --peer-python <that env's python>`",
+}
 
 
 def main(argv: list[str]) -> int:
-    scripts = sorted(HERE.glob("bench_*.py"))
+    scripts = sorted(s for s in HERE.glob("bench_*.py") if s.name not in SEPARATE)
     if argv:
         wanted = {
             f"bench_{name.removeprefix('bench_').removesuffix('.py')}.py"
             for name in argv
         }
+        for name in sorted(wanted & set(SEPARATE)):
+            print(f"{name} is not run here: {SEPARATE[name]}", file=sys.stderr)
+            return 2
         unknown = wanted - {s.name for s in scripts}
         if unknown:
             print(

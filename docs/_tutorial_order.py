@@ -15,6 +15,7 @@ ORDER = [
     "plot_noisy_records.py",
     "plot_residual_analysis.py",
     "plot_grid_search.py",
+    "plot_multistorey.py",
     "plot_monte_carlo.py",
     "plot_confidence_bands.py",
     "plot_csv_data.py",

@@ -174,13 +174,14 @@ intersphinx_timeout = 10
 # fragment docs/api/<page>.rst when it exists, else the module docstring.
 _TOP_LEVEL_GROUPS = {
     "Estimators": ["TDLRegressor", "ISSMRegressor"],
-    "Data generation": ["HystereticOscillator"],
+    "Data generation": ["HystereticOscillator", "ShearBuilding"],
     "Warnings": ["DivergenceWarning"],
 }
 _API_PAGES = [
     ("sysid_nn", "Estimators and data generation", "sysid_nn"),
     ("excitation", "Excitation processes", "sysid_nn.excitation"),
     ("oscillator", "Hysteretic oscillator module", "sysid_nn.oscillator"),
+    ("building", "Shear building module", "sysid_nn.building"),
     ("residuals", "Residual analysis", "sysid_nn.residuals"),
     ("metrics", "Metrics and scorers", "sysid_nn.metrics"),
     ("plotting", "Plotting", "sysid_nn.plotting"),

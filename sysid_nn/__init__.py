@@ -6,6 +6,7 @@ scikit-learn regressors, a Bouc-Wen hysteretic oscillator to generate data,
 and the residual tests used to validate the identified models.
 
 Public modules: :mod:`sysid_nn.excitation`, :mod:`sysid_nn.oscillator`,
+:mod:`sysid_nn.building` (multi-storey shear buildings),
 :mod:`sysid_nn.residuals`, :mod:`sysid_nn.metrics`, :mod:`sysid_nn.plotting`,
 :mod:`sysid_nn.study`, :mod:`sysid_nn.datasets` (the field's measured
 benchmarks) and :mod:`sysid_nn.uncertainty` (confidence and prediction bands).
@@ -21,6 +22,7 @@ __version__ = "0.1.0.dev0"
 # (no numba compilation, no matplotlib) until a class is actually used.
 _LAZY = {
     "HystereticOscillator": "sysid_nn.oscillator",
+    "ShearBuilding": "sysid_nn.building",
     "TDLRegressor": "sysid_nn._tdl",
     "ISSMRegressor": "sysid_nn._issm",
     "DivergenceWarning": "sysid_nn._exceptions",
@@ -34,6 +36,7 @@ __all__ = [
     "HystereticOscillator",
     "ISSMRegressor",
     "InconsistentVersionWarning",
+    "ShearBuilding",
     "TDLRegressor",
     "UnstablePredictorWarning",
     "load_model",

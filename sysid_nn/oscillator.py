@@ -8,7 +8,6 @@ response to any excitation and generates the paper's records.
 
 from __future__ import annotations
 
-import functools
 import math
 import numbers
 from typing import Any
@@ -39,10 +38,95 @@ _CAL_DT = 0.01
 _CAL_SEED = 0
 
 _PHYSICAL = ("zeta", "omega0", "alpha", "beta", "gamma", "n", "z0")
-_EXCITATION = ("zeta_s", "omega_s", "t1", "t2")
 
 
-class HystereticOscillator(BaseEstimator):
+class _GroundMotionStructure(BaseEstimator):
+    """Parts shared by the structures driven by the paper's excitation.
+
+    Subclasses define ``zeta_s, omega_s, t1, t2, r0`` and ``n_substeps`` as
+    constructor parameters, ``_calibration_key()`` (every value the response
+    depends on, except ``r0``) and ``_mean_peak(force, dt)``, the calibrated
+    measure of the response to the rows of a force per unit mass.
+    """
+
+    def _excitation_params(self) -> dict[str, float]:
+        """Validated Kanai-Tajimi and modulation parameters (eq. 16-18)."""
+        t1, t2 = _exc._check_t1_t2(self.t1, self.t2)
+        return {
+            "zeta_s": check_positive(self.zeta_s, "zeta_s"),
+            "omega_s": check_positive(self.omega_s, "omega_s"),
+            "t1": t1,
+            "t2": t2,
+        }
+
+    def _substeps(self) -> int:
+        return check_positive_int(self.n_substeps, "n_substeps")
+
+    def _calibrated_r0(
+        self,
+        n_realizations: int,
+        n_samples: int,
+        dt: float,
+        target: float,
+        random_state: int | np.random.RandomState | None,
+    ) -> float:
+        """Common-random-numbers solve of ``_mean_peak = target`` for ``r0``.
+
+        Results for an integer seed are cached per parameter set in the
+        process (a scikit-learn estimator hashes by identity, so the cache is
+        keyed by the parameter values).
+        """
+        n_realizations = check_positive_int(n_realizations, "n_realizations")
+        n_samples = check_positive_int(n_samples, "n_samples")
+        dt = check_positive(dt, "dt")
+        target = check_positive(target, "target")
+        seeded = isinstance(random_state, numbers.Integral) and not isinstance(
+            random_state, bool
+        )
+        key = (
+            type(self).__name__,
+            self._calibration_key(),
+            tuple(self._excitation_params().values()),
+            self._substeps(),
+            n_realizations,
+            n_samples,
+            dt,
+            target,
+            int(random_state) if seeded else None,
+        )
+        if seeded and key in _CALIBRATED:
+            return _CALIBRATED[key]
+        unit_force = _exc.paper_excitation(
+            n_samples,
+            dt,
+            r0=1.0,
+            n_realizations=n_realizations,
+            random_state=random_state,
+            **self._excitation_params(),
+        )
+
+        def log_ratio(log_r0: float) -> float:
+            # log(mean peak / target) is close to linear in log r0, so Brent's
+            # method converges in a few evaluations.
+            peak = self._mean_peak(math.exp(log_r0) * unit_force, dt)
+            return math.log(peak / target) if peak > 0 else -math.inf
+
+        r0 = _solve_log_scale(log_ratio)
+        if seeded:
+            _CALIBRATED[key] = r0
+        return r0
+
+    def _resolved_r0(self) -> float:
+        if isinstance(self.r0, str):
+            if self.r0 != "calibrate":
+                raise ValueError(
+                    f"r0 must be 'calibrate' or a non-negative float, got {self.r0!r}."
+                )
+            return self.calibrate_r0()
+        return check_positive(self.r0, "r0", allow_zero=True)
+
+
+class HystereticOscillator(_GroundMotionStructure):
     """Single-degree-of-freedom Bouc-Wen oscillator (paper eq. 13-15).
 
     Equation of motion, with state ``(X, Xd, Z)``:
@@ -191,19 +275,6 @@ class HystereticOscillator(BaseEstimator):
             )
         return p
 
-    def _excitation_params(self) -> dict[str, float]:
-        """Validated Kanai-Tajimi and modulation parameters (eq. 16-18)."""
-        t1, t2 = _exc._check_t1_t2(self.t1, self.t2)
-        return {
-            "zeta_s": check_positive(self.zeta_s, "zeta_s"),
-            "omega_s": check_positive(self.omega_s, "omega_s"),
-            "t1": t1,
-            "t2": t2,
-        }
-
-    def _substeps(self) -> int:
-        return check_positive_int(self.n_substeps, "n_substeps")
-
     # -------------------------------------------------------------- simulation
     def simulate(
         self, F: ArrayLike, dt: float, initial_state: ArrayLike | None = None
@@ -321,14 +392,20 @@ class HystereticOscillator(BaseEstimator):
 
     # ------------------------------------------------------------- calibration
     def _calibration_key(self) -> tuple:
-        # Everything the peak response depends on, except r0 itself.
         p = self._physical_params()
-        e = self._excitation_params()
-        return (
-            tuple(p[k] for k in _PHYSICAL),
-            tuple(e[k] for k in _EXCITATION),
+        return tuple(p[k] for k in _PHYSICAL)
+
+    def _mean_peak(self, force: np.ndarray, dt: float) -> float:
+        # The paper's measure: the mean over records of max |X(t)|.
+        p = self._physical_params()
+        disp, _, _ = simulate_bouc_wen(
+            force,
+            dt,
             self._substeps(),
+            *(p[k] for k in _PHYSICAL),
+            np.zeros((force.shape[0], 3)),
         )
+        return float(np.mean(np.max(np.abs(disp), axis=1)))
 
     def calibrate_r0(
         self,
@@ -384,28 +461,14 @@ class HystereticOscillator(BaseEstimator):
         >>> round(r0, 3)
         0.056
         """
-        n_realizations = check_positive_int(n_realizations, "n_realizations")
-        n_samples = check_positive_int(n_samples, "n_samples")
-        dt = check_positive(dt, "dt")
         target = 2.0 * check_positive(self.z0, "z0") if target is None else target
-        target = check_positive(target, "target")
-        key = self._calibration_key()
-        if isinstance(random_state, numbers.Integral) and not isinstance(
-            random_state, bool
-        ):
-            return _calibrate_cached(
-                key, n_realizations, n_samples, dt, target, int(random_state)
-            )
-        return _calibrate(key, n_realizations, n_samples, dt, target, random_state)
-
-    def _resolved_r0(self) -> float:
-        if isinstance(self.r0, str):
-            if self.r0 != "calibrate":
-                raise ValueError(
-                    f"r0 must be 'calibrate' or a non-negative float, got {self.r0!r}."
-                )
-            return self.calibrate_r0()
-        return check_positive(self.r0, "r0", allow_zero=True)
+        return self._calibrated_r0(
+            n_samples=n_samples,
+            n_realizations=n_realizations,
+            dt=dt,
+            target=target,
+            random_state=random_state,
+        )
 
     # -------------------------------------------------------------- generation
     def generate(
@@ -608,39 +671,13 @@ def _tidy_frame(rec: Bunch) -> pd.DataFrame:
     )
 
 
-def _calibrate(
-    key: tuple,
-    n_realizations: int,
-    n_samples: int,
-    dt: float,
-    target: float,
-    random_state: int | np.random.RandomState | None,
-) -> float:
-    """Common-random-numbers solve of mean peak |X| = target for r0."""
-    physical, excite, n_sub = key
-    p = dict(zip(_PHYSICAL, physical, strict=True))
-    e = dict(zip(_EXCITATION, excite, strict=True))
-    unit_force = _exc.paper_excitation(
-        n_samples,
-        dt,
-        r0=1.0,
-        n_realizations=n_realizations,
-        random_state=random_state,
-        **e,
-    )
-    state0 = np.zeros((n_realizations, 3))
+def _solve_log_scale(log_ratio) -> float:
+    """Scale ``r0`` where ``log_ratio(log r0) = log(mean peak / target)`` is 0.
 
-    def log_ratio(log_r0: float) -> float:
-        # log(mean peak / target) is close to linear in log r0, so Brent's
-        # method converges in a few evaluations.
-        disp, _, _ = simulate_bouc_wen(
-            math.exp(log_r0) * unit_force, dt, n_sub, *(p[k] for k in _PHYSICAL), state0
-        )
-        peak = float(np.mean(np.max(np.abs(disp), axis=1)))
-        return math.log(peak / target) if peak > 0 else -math.inf
-
-    # Bracket around the linear-scaling estimate (peak proportional to r0).
-    lo = hi = math.log(target / (target * math.exp(log_ratio(0.0))))
+    Brackets the root around the linear-scaling estimate (peak proportional
+    to ``r0``), then refines it with Brent's method.
+    """
+    lo = hi = -log_ratio(0.0)
     h_lo = h_hi = log_ratio(lo)
     for _ in range(60):
         if h_lo <= 0 <= h_hi:
@@ -662,8 +699,5 @@ def _calibrate(
     return math.exp(scipy.optimize.brentq(log_ratio, lo, hi, xtol=1e-4))
 
 
-@functools.lru_cache(maxsize=64)
-def _calibrate_cached(
-    key: tuple, n_realizations: int, n_samples: int, dt: float, target: float, seed: int
-) -> float:
-    return _calibrate(key, n_realizations, n_samples, dt, target, seed)
+#: Calibrated strengths for integer seeds, keyed by everything they depend on.
+_CALIBRATED: dict[tuple, float] = {}

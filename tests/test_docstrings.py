@@ -23,6 +23,7 @@ PUBLIC_MODULES = [
     "sysid_nn",
     "sysid_nn.excitation",
     "sysid_nn.oscillator",
+    "sysid_nn.building",
     "sysid_nn.residuals",
     "sysid_nn.metrics",
     "sysid_nn.plotting",
