@@ -490,9 +490,20 @@ default=None
         chosen = self._start_of(self.best_restart_)
         self.init_, self.linear_model_ = self.__dict__.pop("_linear_starts")[chosen]
         if self.init == "tdl":
-            # The training was the TDL's: report its restarts and effort.
-            self.n_iter_ = self.tdl_.n_iter_
-            self.restart_scores_ = self.tdl_.restart_scores_
+            # The training was the TDL's: report its restarts, histories and
+            # effort.
+            for name in (
+                "n_iter_",
+                "restart_scores_",
+                "n_restarts_",
+                "best_restart_",
+                "best_stage_",
+                "training_history_",
+                "loss_curve_",
+                "validation_scores_",
+                "skipped_stages_",
+            ):
+                setattr(self, name, getattr(self.tdl_, name))
             self.fit_time_ += self.tdl_.fit_time_
         return self
 

@@ -317,6 +317,8 @@ def test_a_refit_drops_what_the_earlier_fit_kept():
         warnings.simplefilter("ignore", ConvergenceWarning)
         model.fit(X, y)
         assert hasattr(model, "tdl_")
+        assert model.training_history_ == model.tdl_.training_history_
+        assert model.n_restarts_ == len(model.restart_scores_)
         model.set_params(init="arx").fit(X, y)
     assert not hasattr(model, "tdl_")
 
