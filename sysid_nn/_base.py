@@ -29,7 +29,7 @@ from sklearn.utils import check_array, check_random_state
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import _check_feature_names, check_is_fitted
 
-from sysid_nn import _progress, _uncertainty
+from sysid_nn import _progress, _selection, _uncertainty
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._progress import report_stage
 from sysid_nn._record_checks import check_sampling, trim_padding
@@ -154,6 +154,8 @@ class _Data:
     h: int
     #: Leading modelled rows left out of a validation score (see ``scored``).
     skip: int = 0
+    #: Leading modelled rows of every sequence left out of it too (a burn-in).
+    burn: int = 0
 
     @property
     def modelled(self) -> np.ndarray:
@@ -168,7 +170,8 @@ class _Data:
     @property
     def scored(self) -> np.ndarray:
         """Modelled rows that count in a validation score."""
-        return self.modelled[self.skip :]
+        rows = [np.arange(a + self.h + self.burn, b) for a, b in pairwise(self.starts)]
+        return np.concatenate(rows)[self.skip :]
 
 
 # --------------------------------------------------------------------------
@@ -541,6 +544,8 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
             rng = check_random_state(self.random_state)
             n_runs = self._n_restarts()
             seeds = rng.randint(np.iinfo(np.int32).max, size=n_runs)
+            # Selection, part 1: the linear model and the validation burn-in.
+            linear = _selection.linear_candidate(self, train, val, seeds[0])
             start = time.perf_counter()
             # Successive halving (see sysid_nn._schedule): every restart runs
             # the first stages, the better half by its score the rest.
@@ -556,8 +561,8 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
                 for k, result in zip(kept, done, strict=True):
                     results[k] = result
             runs = [run for _, run in results]
-            best = min(range(len(runs)), key=lambda k: runs[k].score)
-            chosen = runs[best]
+            # Selection, part 2: a bounded restart that beats the linear model.
+            chosen = _selection.choose(self, train, val, runs, linear)
             if not np.all(np.isfinite(chosen.w)):
                 raise ValueError(
                     "The solver produced non-finite weights. Check the data for "
