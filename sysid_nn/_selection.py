@@ -25,7 +25,7 @@ import numpy as np
 #: A validation record simulated from rest is scored after the linear
 #: model's response to its initial state has fallen below this share of
 #: its start.
-_SETTLED = 0.01
+_SETTLED = 0.001
 #: ... but at most after this share of the record.
 _MAX_BURN_SHARE = 0.5
 #: Restarts are disqualified whose free run diverges on the training
