@@ -79,3 +79,37 @@ def test_validation_record_from_rest_judges_as_the_tail_within_the_record():
     apart = TDLRegressor(**model).fit(X[:n], y[:n], X_val=X[n:], y_val=y[n:])
     ratio = apart.best_validation_score_ / within.best_validation_score_
     assert 1 / 1.5 < ratio < 1.5
+
+
+def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
+    from sysid_nn._base import _Run
+    from sysid_nn._selection import bounded_beyond_range, choose
+
+    X, y, _ = _linear_record(0, noise=0.0)
+    y = np.tanh(y)
+    model = TDLRegressor(
+        output_lags=2, input_lags=2, hidden_layer_sizes=(1,), activation="logistic",
+        n_init=1, max_iter=5, early_stopping=False, random_state=0,
+    ).fit(X, y)  # fmt: skip
+    train = model._stack([X], [y[:, None]])
+    # A hidden node that wakes up only above 1.6 times the largest training
+    # excitation: silent in ``good``, in ``bad`` it then throws the output
+    # far out of range.
+    good = model.coefs_.copy()
+    (w1, b1), (w2, _) = model._layer_slices()[0]
+    u_col = model.output_lags * model.n_outputs_  # first excitation lag
+    good[w1] = 0.0
+    good[w1.start + u_col] = 50.0 / np.abs(train.U).max()
+    good[b1] = -100.0
+    good[w2] = 0.0
+    bad = good.copy()
+    bad[w2] = 1e6
+    assert bounded_beyond_range(model, good, train)
+    assert not bounded_beyond_range(model, bad, train)
+    # Within the training range the two are the same model.
+    np.testing.assert_allclose(
+        model._run(bad, train, 1, False)[0], model._run(good, train, 1, False)[0]
+    )
+    runs = [_Run(bad, 0.0, 0.5, 0.5, 1, True), _Run(good, 0.0, 1.0, 1.0, 1, True)]
+    assert choose(model, train, None, runs, None).w is good
+    assert model.selected_ == "network"
