@@ -45,6 +45,7 @@ def _linear_copy(est):
     """A shallow copy of ``est`` (scaling fitted) with no hidden layer."""
     lin = copy.copy(est)
     lin.hidden_layer_sizes = ()
+    lin.verbose = 0  # its progress is not a restart's
     return lin
 
 
