@@ -28,6 +28,8 @@ import numpy as np
 _SETTLED = 0.001
 #: ... but at most after this share of the record.
 _MAX_BURN_SHARE = 0.5
+#: Scores (standardised mean squared errors) this close are a tie.
+_TIE = 1e-12
 #: Restarts are disqualified whose free run diverges on the training
 #: excitation scaled about its mean by this factor.
 _AMPLITUDE_MARGIN = 2.0
@@ -181,6 +183,10 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
     if best.score < lin.score or not np.isfinite(lin.score):
         return best
     est.selected_ = "linear"
+    if best.score - lin.score <= _TIE * (1.0 + lin.score):
+        # A tie within rounding (both exact, or the restarts never left
+        # the linear start): the linear model, nothing to warn about.
+        return replace(lin, w=linear.w)
     warnings.warn(
         f"No restart of {type(est).__name__} beat its linear model on the "
         f"{'validation' if val is not None else 'training'} records "
