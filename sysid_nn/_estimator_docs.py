@@ -79,12 +79,13 @@ best_validation_score_ : float or None
 restart_scores_ : ndarray
     Negative selection loss of every restart (of a restart dropped by the
     successive halving, at the point it stopped).
-selected_ : {"network", "linear"}
+selected_ : {"restart", "linear"}
     What ``fit`` returned: the best restart, or the linear model (the
     network without hidden layers, trained by the same schedule; the
     network computes it with its output layer silent) when no restart
     whose free run stays bounded at twice the training amplitude beat
-    it, with a warning.
+    it, with a warning. A model without hidden layers is its restarts'
+    best.
 linear_score_ : float or None
     Negative selection loss of that linear model; None where it is not a
     candidate (no hidden layer, no linear part, or the ISSM's TDL start).

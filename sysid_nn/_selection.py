@@ -174,7 +174,7 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
     ]
     pool = [r for r, ok in zip(runs, bounded, strict=True) if ok] or runs
     best = min(pool, key=lambda r: r.score)
-    est.selected_ = "network"
+    est.selected_ = "restart"
     est.linear_score_ = None
     if linear is None:
         return best

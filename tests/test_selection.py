@@ -65,7 +65,7 @@ def test_network_that_beats_the_linear_model_is_kept():
         net = TDLRegressor(n_init=2, max_iter=30, random_state=0).fit(
             X, y, X_val=Xv, y_val=yv
         )
-    assert net.selected_ == "network"
+    assert net.selected_ == "restart"
     assert net.linear_score_ < net.restart_scores_.max()
 
 
@@ -112,4 +112,4 @@ def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
     )
     runs = [_Run(bad, 0.0, 0.5, 0.5, 1, True), _Run(good, 0.0, 1.0, 1.0, 1, True)]
     assert choose(model, train, None, runs, None).w is good
-    assert model.selected_ == "network"
+    assert model.selected_ == "restart"
