@@ -26,8 +26,11 @@ import numpy as np
 #: model's response to its initial state has fallen below this share of
 #: its start.
 _SETTLED = 0.001
-#: ... but at most after this share of the record.
+#: ... but at most after this share of the record, and only where the
+#: linear model's error over that burn-in is this many times its error
+#: after it (a record that starts at rest needs none).
 _MAX_BURN_SHARE = 0.5
+_TRANSIENT = 2.0
 #: Scores (standardised mean squared errors) this close are a tie.
 _TIE = 1e-12
 #: Restarts are disqualified whose free run diverges on the training
@@ -115,7 +118,9 @@ def burn_in(est, w: np.ndarray, data) -> int:
     The difference between two free runs over ``data``, one from rest and
     one with every history output one standard deviation higher, falls
     below ``_SETTLED`` of its start (the slowest sequence); at most
-    ``_MAX_BURN_SHARE`` of the shortest sequence.
+    ``_MAX_BURN_SHARE`` of the shortest sequence. Sequences whose start
+    the run from rest fits no worse than ``_TRANSIENT`` times the rest of
+    them started at rest and need none.
     """
     from sysid_nn._base import _FREE_RUN
 
@@ -128,12 +133,17 @@ def burn_in(est, w: np.ndarray, data) -> int:
     if any((r[2] >= 0).any() for r in runs):
         return cap
     gap = np.abs(runs[1][0] - runs[0][0]).max(axis=1)
+    error = np.sum((runs[0][0] - data.Y) ** 2, axis=1)
     burn = 0
     for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
-        g = gap[a + data.h : b]
+        g, e = gap[a + data.h : b], error[a + data.h : b]
         late = np.flatnonzero(g > _SETTLED * max(g[0], 1e-12))
-        burn = max(burn, int(late[-1]) + 1 if late.size else 0)
-    return min(burn, cap)
+        n = min(int(late[-1]) + 1 if late.size else 0, cap)
+        # A record that starts at rest shows no transient: the linear
+        # model from rest fits its start no worse than the rest of it.
+        if n and e[:n].mean() > _TRANSIENT * e[n:].mean():
+            burn = max(burn, n)
+    return burn
 
 
 def validation_loss(est, w: np.ndarray, val) -> float:

@@ -113,3 +113,18 @@ def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
     runs = [_Run(bad, 0.0, 0.5, 0.5, 1, True), _Run(good, 0.0, 1.0, 1.0, 1, True)]
     assert choose(model, train, None, runs, None).w is good
     assert model.selected_ == "restart"
+
+
+def test_burn_in_only_for_records_that_start_in_motion():
+    from sysid_nn._selection import burn_in
+
+    X, y, _ = _linear_record(3, n=1000, noise=0.01, poles=(-1.8, 0.85))
+    model = TDLRegressor(
+        output_lags=2, input_lags=2, hidden_layer_sizes=(), max_iter=30,
+        random_state=0,
+    ).fit(X, y)  # fmt: skip
+    at_rest = model._stack([X[:200]], [y[:200, None]])
+    in_motion = model._stack([X[600:800]], [y[600:800, None]])
+    assert burn_in(model, model.coefs_, at_rest) == 0
+    # The slowest mode (radius 0.92) takes about 80 samples to fall to 0.1 %.
+    assert 40 <= burn_in(model, model.coefs_, in_motion) <= 100
