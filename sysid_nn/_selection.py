@@ -27,10 +27,11 @@ import numpy as np
 #: its start.
 _SETTLED = 0.001
 #: ... but at most after this share of the record, and only where the
-#: linear model's error over that burn-in is this many times its error
-#: after it (a record that starts at rest needs none).
+#: linear model's error over the first ``_START`` samples is this many
+#: times its mean error (a record that starts at rest needs none).
 _MAX_BURN_SHARE = 0.5
 _TRANSIENT = 2.0
+_START = 10
 #: Scores (standardised mean squared errors) this close are a tie.
 _TIE = 1e-12
 #: Restarts are disqualified whose free run diverges on the training
@@ -118,9 +119,12 @@ def burn_in(est, w: np.ndarray, data) -> int:
     The difference between two free runs over ``data``, one from rest and
     one with every history output one standard deviation higher, falls
     below ``_SETTLED`` of its start (the slowest sequence); at most
-    ``_MAX_BURN_SHARE`` of the shortest sequence. Sequences whose start
-    the run from rest fits no worse than ``_TRANSIENT`` times the rest of
-    them started at rest and need none.
+    ``_MAX_BURN_SHARE`` of the shortest sequence. Sequences whose first
+    ``_START`` samples the run from rest fits no worse than ``_TRANSIENT``
+    times the whole of them started at rest and need none (measured:
+    records that start at rest but whose excitation is strongest early,
+    as the oscillator's, were given half a record of burn-in by a rule
+    that compared the burn-in with the rest).
     """
     from sysid_nn._base import _FREE_RUN
 
@@ -140,8 +144,8 @@ def burn_in(est, w: np.ndarray, data) -> int:
         late = np.flatnonzero(g > _SETTLED * max(g[0], 1e-12))
         n = min(int(late[-1]) + 1 if late.size else 0, cap)
         # A record that starts at rest shows no transient: the linear
-        # model from rest fits its start no worse than the rest of it.
-        if n and e[:n].mean() > _TRANSIENT * e[n:].mean():
+        # model from rest fits its first samples no worse than the whole.
+        if n and e[:_START].mean() > _TRANSIENT * e.mean():
             burn = max(burn, n)
     return burn
 
