@@ -87,7 +87,10 @@ def linear_candidate(est, train, val, seed: int) -> LinearCandidate | None:
     lin = _linear_copy(est)
     lin._prepare_structure(train)
     n_stages = len(lin._stages())
-    _, run = lin._fit_stages(train, val, _Restart(0, int(seed)), n_stages)
+    # Through the class: an attribute of the instance (copied) must not
+    # stand in for the method.
+    restart = _Restart(0, int(seed))
+    _, run = type(lin)._fit_stages(lin, train, val, restart, n_stages)
     if val is not None and val.skip == 0:
         val.burn = burn_in(lin, run.w, val)
         loss = validation_loss(lin, run.w, val)
@@ -202,18 +205,18 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
         # the linear start): the linear model, nothing to warn about.
         return replace(lin, w=linear.w)
     warnings.warn(
-        f"No restart of {type(est).__name__} beat its linear model on the "
-        f"{'validation' if val is not None else 'training'} records "
-        f"(best restart {best.score:.3g}, linear model {lin.score:.3g}, mean "
+        f"The linear model of {type(est).__name__} beat every trained network "
+        f"on the {'validation' if val is not None else 'training'} records "
+        f"(best network {best.score:.3g}, linear model {lin.score:.3g}, mean "
         "squared free-run error of the standardised outputs"
         + (
-            f"; {len(runs) - sum(bounded)} of {len(runs)} restarts diverged at "
+            f"; {len(runs) - sum(bounded)} of {len(runs)} networks diverged at "
             f"{_AMPLITUDE_MARGIN:g} times the training amplitude"
             if not all(bounded)
             else ""
         )
-        + "): the linear model is returned (selected_ = 'linear'). More or "
-        "longer records, more restarts (n_init) or another structure may help.",
+        + "): it is returned (selected_ = 'linear'). More or longer records, a "
+        "larger n_init or another structure may help.",
         UserWarning,
         stacklevel=3,
     )

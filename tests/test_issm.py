@@ -642,7 +642,7 @@ def test_default_start_follows_the_noise_on_the_records():
             warnings.simplefilter("error", UserWarning)  # no noise warning
             warnings.simplefilter("ignore", ConvergenceWarning)
             # One step of training: the linear model may win.
-            warnings.filterwarnings("ignore", "No restart", UserWarning)
+            warnings.filterwarnings("ignore", "The linear model of", UserWarning)
             return ISSMRegressor(n_init=1, max_iter=1, random_state=0).fit(u, y)
 
     u, y = _noisy_second_order(0.0)

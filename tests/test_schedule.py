@@ -113,7 +113,7 @@ def test_subset_is_reproducible_from_the_random_state(small_subsets):
 
 
 def test_stages_before_the_free_run_see_the_subset(small_subsets, monkeypatch):
-    from sysid_nn import _base
+    from sysid_nn import _base, _selection
 
     Xs, ys = _records(n=4)
     solve = _base._SOLVERS["lm"]
@@ -124,6 +124,9 @@ def test_stages_before_the_free_run_see_the_subset(small_subsets, monkeypatch):
         return solve(objective, w, iters, tol, tracker, stall)
 
     monkeypatch.setitem(_base._SOLVERS, "lm", spying)
+    # The restart's stages alone, not those of the linear model selection
+    # compares it with.
+    monkeypatch.setattr(_selection, "linear_candidate", lambda *args: None)
     _fit(_tdl(), Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
     n_train = sum(len(x) for x in Xs[:3])
     assert [s for s, _ in seen] == [1, 10, 40, _FREE_RUN]
