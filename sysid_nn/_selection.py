@@ -3,9 +3,11 @@
 ``fit`` calls two functions of this module:
 
 * :func:`linear_candidate`, before the restarts: the same estimator with no
-  hidden layer (the linear output-error model, stable where the linear start
-  is not: its free run is trained by the same schedule), and the burn-in
-  that validation records simulated from rest skip (:func:`burn_in`);
+  hidden layer (the linear output-error model: its free run is trained by
+  the same schedule, which stabilises most unstable linear starts; one that
+  still diverges on validation scores infinitely and loses), and the
+  burn-in that validation records simulated from rest skip where they start
+  in motion (:func:`burn_in`);
 * :func:`choose`, after them: every restart whose free run diverges on the
   training excitation at twice its amplitude is disqualified, and the best
   remaining restart is kept only if its validation score beats the linear
