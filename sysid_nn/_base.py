@@ -305,6 +305,12 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self.restart_scores_ = np.array([-r.score for r in result.runs])
         self.n_restarts_ = len(result.runs)
         self.best_restart_ = result.chosen
+        self.selected_ = result.selected
+        self.linear_score_ = (
+            None
+            if result.linear is None
+            else (-result.linear.score if np.isfinite(result.linear.score) else -np.inf)
+        )
         self.best_stage_ = chosen.best_stage
         self.training_history_ = [
             [dataclasses.replace(stage) for stage in run.history] for run in result.runs

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from contextlib import contextmanager
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 from sklearn.utils import check_array
@@ -42,6 +43,8 @@ class _Data:
     h: int
     #: Leading modelled rows left out of a validation score (see ``scored``).
     skip: int = 0
+    #: Leading modelled rows of every sequence left out of it too (a burn-in).
+    burn: int = 0
 
     @property
     def modelled(self) -> np.ndarray:
@@ -56,7 +59,8 @@ class _Data:
     @property
     def scored(self) -> np.ndarray:
         """Modelled rows that count in a validation score."""
-        return self.modelled[self.skip :]
+        rows = [np.arange(a + self.h + self.burn, b) for a, b in pairwise(self.starts)]
+        return np.concatenate(rows)[self.skip :]
 
 
 def is_sequence_list(data) -> bool:

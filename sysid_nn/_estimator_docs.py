@@ -81,8 +81,9 @@ restart_scores_ : ndarray
     successive halving, at the point it stopped).
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
-best_restart_ : int
-    Index of the chosen restart in ``restart_scores_``.
+best_restart_ : int or None
+    Index of the chosen restart in ``restart_scores_``; None where the
+    linear model was returned (``selected_ == "linear"``).
 best_stage_ : int
     Training stage in which the chosen weights were seen (an index into
     ``training_history_[best_restart_]``).
@@ -109,6 +110,16 @@ fallback_ : {None, "linear_start", "none"}
     validation (or training) records and the linear starting model was
     returned; ``"none"`` when that diverged too and the chosen restart's
     weights were kept; both warn :class:`~sysid_nn.DivergenceWarning`.
+selected_ : {"restart", "linear"}
+    What ``fit`` returned: the best restart, or the linear model (the
+    network without hidden layers, trained by the same schedule; the
+    network computes it with its output layer silent) when no restart
+    whose free run stays bounded at twice the training amplitude beat
+    it, with a warning. A model without hidden layers is its restarts'
+    best.
+linear_score_ : float or None
+    Negative selection loss of that linear model; None where it is not a
+    candidate (no hidden layer, no linear part, or the ISSM's TDL start).
 fit_time_ : float
     Seconds spent in training.
 layer_coefs_ : list of ndarray

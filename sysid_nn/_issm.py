@@ -487,7 +487,9 @@ default=None
             super()._fit(X, y, X_val=X_val, y_val=y_val)
         finally:
             del self._fit_records
-        chosen = self._start_of(self.best_restart_)
+        # The linear model (best_restart_ None) was trained from the first
+        # restart's start.
+        chosen = self._start_of(self.best_restart_ or 0)
         self.init_, self.linear_model_ = self.__dict__.pop("_linear_starts")[chosen]
         if self.init == "tdl":
             # The training was the TDL's: report its restarts, histories and

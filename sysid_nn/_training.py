@@ -33,7 +33,7 @@ import threadpoolctl
 from joblib import Parallel, delayed
 from sklearn.utils import check_random_state
 
-from sysid_nn import _progress
+from sysid_nn import _progress, _selection
 from sysid_nn._data import _FREE_RUN, _Data
 from sysid_nn._exceptions import DivergenceWarning
 from sysid_nn._progress import report_stage
@@ -202,10 +202,18 @@ class Training:
     w: np.ndarray
     fallback: str | None
     fit_time: float
+    #: ``"restart"``, or ``"linear"`` when the linear model was returned.
+    selected: str = "restart"
+    #: The linear model's run (None where it is no candidate).
+    linear: _Run | None = None
+    #: The chosen run (a restart's, or the linear model's).
+    chosen_run: _Run | None = None
 
     @property
     def run(self) -> _Run:
-        return self.runs[self.chosen]
+        return (
+            self.chosen_run if self.chosen_run is not None else self.runs[self.chosen]
+        )
 
 
 def train(est, train_data: _Data, val: _Data | None) -> Training:
@@ -220,6 +228,11 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     start = time.perf_counter()
     n_stages = len(est._stages())
     halving = n_runs > 1 and n_stages > HALVING_AFTER
+    # The linear model every network must beat; it also sets the burn-in
+    # of validation records simulated from rest (see sysid_nn._selection).
+    linear = _selection.linear_candidate(
+        est, train_data, val, _Restart(0, int(seeds[0]))
+    )
     restarts = [_Restart(k, seed) for k, seed in enumerate(seeds)]
     cut = HALVING_AFTER if halving else n_stages
     results = run_restarts(est, train_data, val, restarts, cut)
@@ -230,8 +243,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         for k, result in zip(kept, done, strict=True):
             results[k] = result
     runs = [run for _, run in results]
-    best = choose_restart(runs)
-    chosen = runs[best]
+    best, chosen, selected = choose_restart(est, train_data, val, runs, linear)
     if not np.all(np.isfinite(chosen.w)):
         raise ValueError(
             "The solver produced non-finite weights. Check the data for "
@@ -240,17 +252,31 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     w, used = chosen.w, None
     if not np.isfinite(chosen.score):
         w, used = fallback(est, chosen.w, train_data, val)
-    return Training(runs, best, w, used, time.perf_counter() - start)
+    return Training(
+        runs,
+        best,
+        w,
+        used,
+        time.perf_counter() - start,
+        selected,
+        None if linear is None else linear.run,
+        chosen,
+    )
 
 
-def choose_restart(runs: list) -> int:
-    """Index of the restart whose weights ``fit`` returns.
+def choose_restart(est, train_data, val, runs: list, linear):
+    """The run whose weights ``fit`` returns: ``(index, run, selected)``.
 
-    The restart with the lowest score: the validation loss of its best
+    Among the restarts whose free run stays bounded beyond the training
+    range, the one with the lowest score (the validation loss of its best
     weights, or without validation data its training loss on the final
-    objective (a diverged one scores ``inf``). The first of equal ones.
+    objective; a diverged one scores ``inf``; the first of equal ones), if
+    it beats the linear model; else the linear model (``index`` None,
+    ``selected`` ``"linear"``). See :func:`sysid_nn._selection.choose`.
     """
-    return min(range(len(runs)), key=lambda k: runs[k].score)
+    chosen, selected = _selection.choose(est, train_data, val, runs, linear)
+    index = next((k for k, r in enumerate(runs) if r is chosen), None)
+    return index, chosen, selected
 
 
 def fallback(est, w: np.ndarray, train_data: _Data, val: _Data | None):

@@ -116,7 +116,7 @@ def test_subset_is_reproducible_from_the_random_state(small_subsets):
 
 
 def test_stages_before_the_free_run_see_the_subset(small_subsets, monkeypatch):
-    from sysid_nn import _training
+    from sysid_nn import _selection, _training
 
     Xs, ys = _records(n=4)
     solve = _training._SOLVERS["lm"]
@@ -127,6 +127,9 @@ def test_stages_before_the_free_run_see_the_subset(small_subsets, monkeypatch):
         return solve(objective, w, iters, tol, tracker, stall)
 
     monkeypatch.setitem(_training._SOLVERS, "lm", spying)
+    # The restart's stages alone, not those of the linear model selection
+    # compares it with.
+    monkeypatch.setattr(_selection, "linear_candidate", lambda *args: None)
     _fit(_tdl(), Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
     n_train = sum(len(x) for x in Xs[:3])
     assert [s for s, _ in seen] == [1, 10, 40, _FREE_RUN]

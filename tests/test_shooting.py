@@ -136,6 +136,8 @@ def test_auto_shooting_follows_the_noise_and_the_solver():
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)  # handled: no noise warning
         warnings.simplefilter("ignore", ConvergenceWarning)
+        # Two steps of training: the linear model may win.
+        warnings.filterwarnings("ignore", "The linear model of", UserWarning)
         free = _net(max_iter=2).fit(u, noisy)
         assert (free.shooting_, free.alpha_) == ("free", 0.03)
         assert _net(max_iter=2, alpha=0.5).fit(u, noisy).alpha_ == 0.5

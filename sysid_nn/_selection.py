@@ -1,0 +1,215 @@
+"""Model selection: a network is kept only where it beats a linear model.
+
+``fit`` calls two functions of this module:
+
+* :func:`linear_candidate`, before the restarts: the same estimator with no
+  hidden layer (the linear output-error model: its free run is trained by
+  the same schedule, which stabilises most unstable linear starts; one that
+  still diverges on validation scores infinitely and loses), and the
+  burn-in that validation records simulated from rest skip where they start
+  in motion (:func:`burn_in`);
+* :func:`choose`, after them: every restart whose free run diverges on the
+  training excitation at twice its amplitude is disqualified, and the best
+  remaining restart is kept only if its validation score beats the linear
+  model's; otherwise the linear model is returned, embedded in the
+  network's own weights (network output silent, linear part = the linear
+  model), with a warning.
+"""
+
+from __future__ import annotations
+
+import copy
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from sysid_nn._data import _FREE_RUN
+
+#: A validation record simulated from rest is scored after the linear
+#: model's response to its initial state has fallen below this share of
+#: its start.
+_SETTLED = 0.001
+#: ... but at most after this share of the record, and only where the
+#: linear model's error over the first ``_START`` samples is this many
+#: times its mean error (a record that starts at rest needs none).
+_MAX_BURN_SHARE = 0.5
+_TRANSIENT = 2.0
+_START = 10
+#: Scores (standardised mean squared errors) this close are a tie.
+_TIE = 1e-12
+#: Restarts are disqualified whose free run diverges on the training
+#: excitation scaled about its mean by this factor.
+_AMPLITUDE_MARGIN = 2.0
+
+
+@dataclass
+class LinearCandidate:
+    """The linear model of a fit: its run (own weights) and the network's."""
+
+    run: object
+    w: np.ndarray
+
+
+def _linear_copy(est):
+    """A shallow copy of ``est`` (scaling fitted) with no hidden layer."""
+    lin = copy.copy(est)
+    lin.hidden_layer_sizes = ()
+    lin.verbose = 0  # its progress is not a restart's
+    return lin
+
+
+def has_linear_candidate(est) -> bool:
+    """Whether ``est`` is a network that can hold the linear model exactly.
+
+    The linear model is embedded in the linear part of the network (the
+    TDL's ``linear_bypass``, the ISSM's ``linear_part``); an ISSM started
+    from a TDL network was trained as that network, which was selected so.
+    """
+    return (
+        len(est._hidden_layers()) > 0
+        and est._bypass()
+        and getattr(est, "init", None) != "tdl"
+    )
+
+
+def linear_candidate(est, train, val, restart) -> LinearCandidate | None:
+    """Fit the linear model of ``est`` and set the burn-in of ``val``.
+
+    The linear model is ``est`` without hidden layers, started from its
+    linear start and trained by the same schedule on the same data, as the
+    fresh ``restart`` (a :class:`~sysid_nn._training._Restart`). A
+    validation record simulated from rest (``val.skip == 0``) is then
+    scored after :func:`burn_in` samples, so that a separate validation
+    record and the tail of the training record judge alike. Returns None
+    for estimators without a linear candidate (see
+    :func:`has_linear_candidate`).
+    """
+    if not has_linear_candidate(est):
+        return None
+    lin = _linear_copy(est)
+    lin._prepare_structure(train)
+    n_stages = len(lin._stages())
+    # Through the class: an attribute of the instance (copied) must not
+    # stand in for the method.
+    _, run = type(lin)._fit_stages(lin, train, val, restart, n_stages)
+    if val is not None and val.skip == 0:
+        val.burn = burn_in(lin, run.w, val)
+        loss = validation_loss(lin, run.w, val)
+        run = replace(run, score=loss, val_loss=loss)
+    return LinearCandidate(run=run, w=embed_linear(est, run.w))
+
+
+def embed_linear(est, w_lin: np.ndarray) -> np.ndarray:
+    """The network weights of ``est`` that compute the linear model ``w_lin``.
+
+    A model without hidden layers has the weights ``[L.ravel(), c]``; the
+    network computes it with its output layer silent, ``c`` as the output
+    bias and ``L`` as its linear part (the last weights). The hidden
+    weights keep their random start (silent, but not degenerate).
+    """
+    w = est._initial_params(np.random.RandomState(0))
+    layout = est._layout()
+    out = layout.layers[-1]
+    n_L = layout.bypass.stop - layout.bypass.start
+    w[layout.bypass] = w_lin[:n_L]
+    w[out.biases] = w_lin[n_L:]
+    w[out.weights] = 0.0
+    return w
+
+
+def burn_in(est, w: np.ndarray, data) -> int:
+    """Samples until ``w``'s response to its initial state has settled.
+
+    The difference between two free runs over ``data``, one from rest and
+    one with every history output one standard deviation higher, falls
+    below ``_SETTLED`` of its start (the slowest sequence); at most
+    ``_MAX_BURN_SHARE`` of the shortest sequence. Sequences whose first
+    ``_START`` samples the run from rest fits no worse than ``_TRANSIENT``
+    times the whole of them started at rest and need none (measured:
+    records that start at rest but whose excitation is strongest early,
+    as the oscillator's, were given half a record of burn-in by a rule
+    that compared the burn-in with the rest).
+    """
+    shifted = replace(data, Y=data.Y.copy())
+    for a in data.starts[:-1]:
+        shifted.Y[a : a + data.h] += 1.0
+    runs = [est._run(w, d, _FREE_RUN, False, keep_state=False) for d in (data, shifted)]
+    lengths = np.diff(data.starts) - data.h
+    cap = int(_MAX_BURN_SHARE * lengths.min())
+    if any((r[2] >= 0).any() for r in runs):
+        return cap
+    gap = np.abs(runs[1][0] - runs[0][0]).max(axis=1)
+    error = np.sum((runs[0][0] - data.Y) ** 2, axis=1)
+    burn = 0
+    for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
+        g, e = gap[a + data.h : b], error[a + data.h : b]
+        late = np.flatnonzero(g > _SETTLED * max(g[0], 1e-12))
+        n = min(int(late[-1]) + 1 if late.size else 0, cap)
+        # A record that starts at rest shows no transient: the linear
+        # model from rest fits its first samples no worse than the whole.
+        if n and e[:_START].mean() > _TRANSIENT * e.mean():
+            burn = max(burn, n)
+    return burn
+
+
+def validation_loss(est, w: np.ndarray, val) -> float:
+    """Mean squared free-run error of ``w`` on the scored rows of ``val``."""
+    Yhat, _, diverged, _ = est._run(w, val, _FREE_RUN, False, keep_state=False)
+    if (diverged >= 0).any():
+        return np.inf
+    e = Yhat[val.scored] - val.Y[val.scored]
+    return float(np.mean(e * e))
+
+
+def bounded_beyond_range(est, w: np.ndarray, train) -> bool:
+    """Whether ``w``'s free run stays bounded at twice the training amplitude.
+
+    The training excitation, standardised, is scaled by
+    ``_AMPLITUDE_MARGIN`` about its mean and the model run from rest; it
+    must not leave the divergence bound.
+    """
+    louder = replace(train, U=train.U * _AMPLITUDE_MARGIN)
+    diverged = est._run(w, louder, _FREE_RUN, False, keep_state=False)[2]
+    return not (diverged >= 0).any()
+
+
+def choose(est, train, val, runs: list, linear: LinearCandidate | None):
+    """The run ``fit`` keeps and what it is: ``(run, "restart" | "linear")``.
+
+    Restarts whose free run diverges beyond the training range are
+    disqualified (unless all are); the best remaining one is kept if it
+    scores better than the linear model (validation loss, or training
+    loss without validation), else the linear model, with a warning.
+    """
+    bounded = [
+        np.isfinite(r.score) and bounded_beyond_range(est, r.w, train) for r in runs
+    ]
+    pool = [r for r, ok in zip(runs, bounded, strict=True) if ok] or runs
+    best = min(pool, key=lambda r: r.score)
+    if linear is None:
+        return best, "restart"
+    lin = linear.run
+    if best.score < lin.score or not np.isfinite(lin.score):
+        return best, "restart"
+    if best.score - lin.score <= _TIE * (1.0 + lin.score):
+        # A tie within rounding (both exact, or the restarts never left
+        # the linear start): the linear model, nothing to warn about.
+        return replace(lin, w=linear.w), "linear"
+    warnings.warn(
+        f"The linear model of {type(est).__name__} beat every trained network "
+        f"on the {'validation' if val is not None else 'training'} records "
+        f"(best network {best.score:.3g}, linear model {lin.score:.3g}, mean "
+        "squared free-run error of the standardised outputs"
+        + (
+            f"; {len(runs) - sum(bounded)} of {len(runs)} networks diverged at "
+            f"{_AMPLITUDE_MARGIN:g} times the training amplitude"
+            if not all(bounded)
+            else ""
+        )
+        + "): it is returned (selected_ = 'linear'). More or longer records, a "
+        "larger n_init or another structure may help.",
+        UserWarning,
+        stacklevel=6,
+    )
+    return replace(lin, w=linear.w), "linear"
