@@ -16,6 +16,7 @@ from sklearn.model_selection import GridSearchCV, KFold
 from sysid_nn import HystereticOscillator, ISSMRegressor, TDLRegressor
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 def test_restarts_and_grid_search_on_worker_processes():
     distributed = pytest.importorskip("dask.distributed")
     rec = HystereticOscillator().generate(4, 400, random_state=3)

@@ -257,6 +257,7 @@ def test_noise_free_nonlinear_autoregression_gets_no_noise_warning():
     assert not model.white_misfit_
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 def test_noisy_records_are_told_apart_from_unresolved_dynamics():
     # Coarse clean records: a broadband misfit of dynamics the lags do not
     # resolve (smooth), which switches to fitted segment states silently.
@@ -315,6 +316,7 @@ def test_an_interrupted_refit_leaves_the_model_as_it_was(monkeypatch):
     np.testing.assert_array_equal(model.simulate(X[2]), before)
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 def test_a_refit_drops_what_the_earlier_fit_kept():
     X, y = _oscillator_records(3, seed=8)
     model = ISSMRegressor(init="tdl", hidden_layer_sizes=(3,), n_init=1, max_iter=3)

@@ -68,6 +68,7 @@ def test_too_short_sequences_are_rejected_by_every_estimator(est, n):
             est.fit(u, y, X_val=u[:n], y_val=y[:n])
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 @ESTIMATORS
 @pytest.mark.filterwarnings("ignore::sysid_nn.DivergenceWarning")  # 4 samples
 def test_the_shortest_accepted_sequence_fits_without_numpy_warnings(est):
@@ -130,6 +131,7 @@ def test_models_are_unit_free_over_the_usable_range(factor):
     np.testing.assert_allclose(scaled_output / factor, reference, rtol=1e-6, atol=1e-9)
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 @ESTIMATORS
 def test_an_offset_channel_with_rounding_noise_is_a_constant(est):
     # A channel at a level of 1e6 that varies only in its last bits: left
@@ -162,6 +164,7 @@ def test_constant_channels_stay_finite(est):
 # --------------------------------------------------------------------------
 # feature names, as scikit-learn checks them
 # --------------------------------------------------------------------------
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 @ESTIMATORS
 def test_scikit_learn_column_name_check(est):
     check_dataframe_column_names_consistency(type(est).__name__, est)

@@ -251,6 +251,7 @@ def test_oscillator_displacement_and_velocity_measured():
 ROWS_ARE_TIME = "rows are time steps of a recurrence, not independent samples"
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 @parametrize_with_checks(
     [
         ISSMRegressor(hidden_layer_sizes=(3,), n_init=1, max_iter=6, random_state=0),
@@ -418,6 +419,7 @@ def _tdl_records(p, m, n_seq=3, n=150, seed=0):
     return X, y
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 @pytest.mark.parametrize(("p", "m", "hidden", "activation", "delay"), TDL_CASES)
 def test_tdl_start_runs_exactly_as_its_tdl(p, m, hidden, activation, delay):
@@ -516,6 +518,7 @@ def test_simulation_continues_from_its_own_state_and_past_excitation():
     np.testing.assert_allclose(resumed, full[k0:], rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
 def test_fits_in_other_threads_match_the_serial_fit():
     # Multi-threaded BLAS rounds differently: every fit must run under the

@@ -508,6 +508,7 @@ def test_bad_input_messages():
         _small().fit(Xs, ys, X_val=Xs)
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 @parametrize_with_checks(
     [
         TDLRegressor(
@@ -667,6 +668,7 @@ def test_initial_outputs_estimated_from_a_measured_window():
         model.simulate(X[:5], y_init=true[:30])
 
 
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 def test_output_noise_is_estimated_and_warned_about_when_it_swamps_the_dynamics():
     # A lightly damped second-order system sampled finely (about 60 samples
     # per period): its second difference is a small fraction of the output.
