@@ -280,8 +280,13 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
     def _history_length(self) -> int:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _prepare_structure(self, data: _Data) -> None:  # pragma: no cover
-        """Fix data-dependent structure and the linear starting point."""
+    def _prepare_structure(
+        self, data: _Data, val: _Data | None = None
+    ) -> None:  # pragma: no cover
+        """Fix data-dependent structure and the linear starting point.
+
+        ``val`` are the validation records, when there are any.
+        """
         raise NotImplementedError
 
     def _initial_params(
@@ -536,7 +541,7 @@ class _RecurrentRegressorBase(RegressorMixin, BaseEstimator):
         self._check_noise(train, spp, advice)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
         with _single_threaded_blas():
-            self._prepare_structure(train)
+            self._prepare_structure(train, val)
 
             rng = check_random_state(self.random_state)
             n_runs = self._n_restarts()

@@ -25,8 +25,12 @@ from sysid_nn._issm_start import (
 from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_run
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
+from sysid_nn._order import select_order
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]
+
+#: Smallest hidden width of ``hidden_layer_sizes="auto"``.
+AUTO_WIDTH = 7
 
 
 @document_estimator
@@ -244,16 +248,25 @@ class ISSMRegressor(_RecurrentRegressorBase):
 
     _parameter_constraints: dict = {
         **_RecurrentRegressorBase._parameter_constraints,
-        "n_states": [None, Interval(numbers.Integral, 1, None, closed="left")],
+        "n_states": [
+            None,
+            StrOptions({"auto"}),
+            Interval(numbers.Integral, 1, None, closed="left"),
+        ],
+        "hidden_layer_sizes": [
+            "array-like",
+            Interval(numbers.Integral, 1, None, closed="left"),
+            StrOptions({"auto"}),
+        ],
         "linear_part": ["boolean"],
         "init": [StrOptions({"auto", "arx", "subspace", "tdl"})],
     }
 
     def __init__(
         self,
-        n_states=None,
+        n_states="auto",
         input_delay=1,
-        hidden_layer_sizes=(7,),
+        hidden_layer_sizes="auto",
         activation="tanh",
         linear_part=True,
         init="auto",
@@ -395,6 +408,11 @@ default=None
         if self.init == "tdl":
             validate_tdl_start(self)
             return
+        if self.n_states == "auto":
+            # Provisional (the reach of the linear start); the order is
+            # chosen from the data in _prepare_structure.
+            self.n_states_ = p + 2
+            return
         if self.n_states is not None and self.n_states < p:
             raise ValueError(
                 f"n_states={self.n_states} is smaller than the number of measured "
@@ -403,6 +421,14 @@ default=None
                 f"n_outputs + 2."
             )
         self.n_states_ = int(self.n_states) if self.n_states is not None else p + 2
+
+    def _hidden_layers(self) -> tuple:
+        if not (isinstance(self.hidden_layer_sizes, str) and self.hidden_layer_sizes == "auto"):
+            return super()._hidden_layers()
+        # One layer whose width grows with the order (7 up to 3 states, 15 at
+        # 6: the width of the best published networks of that order).
+        n = getattr(self, "n_states_", 3)
+        return (max(AUTO_WIDTH, int(2.5 * n)),)
 
     def _sizes(self) -> np.ndarray:
         n = self.n_states_
@@ -433,11 +459,19 @@ default=None
         return (self.n_states_,), count, meaning
 
     def _independent_segments(self) -> bool:
-        # The unmeasured states carry over from one segment to the next: a
-        # block cut out of a record starts them at zero. Measured on the
-        # generated Bouc-Wen benchmark, stages on such blocks made the test
-        # error 56 % larger (6.9e-6 against 4.4e-6 m).
-        return False
+        # With measured-output restarts the unmeasured states carry over from
+        # one segment to the next: a block cut out of a record starts them at
+        # zero. Measured on the generated Bouc-Wen benchmark, stages on such
+        # blocks made the test error 56 % larger (6.9e-6 against 4.4e-6 m).
+        # Filtered segments start from the filter, which a block runs from its
+        # own burn-in.
+        return self.shooting_ == "filter"
+
+    #: How shooting segments start (see ``_choose_shooting``).
+    _SEGMENT_START = "filter"
+
+    def _choose_shooting(self, noisy: bool) -> str:
+        return self._SEGMENT_START
 
     def _noise_sensitive(self) -> bool:
         # Measured: with displacement and velocity the ISSM kept its accuracy
@@ -499,9 +533,13 @@ default=None
 
     fit.__doc__ = _RecurrentRegressorBase.fit.__doc__
 
-    def _prepare_structure(self, data: _Data) -> None:
-        # The linear start (_issm_start) or the realised TDL network
-        # (_issm_realisation).
+    def _prepare_structure(self, data: _Data, val: _Data | None = None) -> None:
+        # The order (_order), then the linear start (_issm_start) or the
+        # realised TDL network (_issm_realisation).
+        self.__dict__.pop("order_selection_", None)  # from an earlier fit
+        if self.n_states == "auto" and self.init != "tdl":
+            self.order_selection_ = select_order(self, data, data if val is None else val)
+            self.n_states_ = int(self.order_selection_.n_states)
         self._sizes_ = self._sizes()
         self._act = ACTIVATIONS[self.activation]
         self.init_ = self._chosen_start(data)
@@ -640,12 +678,22 @@ default=None
             w, self._sizes_, self._act, self._bypass(), data.Y, data.U, data.starts,
             data.h, self.input_delay, X0, min(seg_len, _FREE_RUN), self._bound,
             mode, want_lin, Xs, J, Z, A, D, JtJ, Jtr, SYRK, diverged,
+            self._filtered(seg_len),
         )  # fmt: skip
         Yhat = np.ascontiguousarray(Xs[:, :p])
         jac = jacobian_result(mode, J, JtJ, Jtr)
         return Yhat, jac, diverged, (Xs, Z, A, D)
 
+    def _filtered(self, seg_len: int) -> bool:
+        """Whether segments of ``seg_len`` start from the innovation filter."""
+        return getattr(self, "shooting_", None) == "filter" and 1 < seg_len < _FREE_RUN
+
     def _gradient(self, w, data, seg_len, state):
+        if self._filtered(seg_len):
+            # No adjoint pass through the filter: J'r of the same run.
+            X0 = self._initial_states(data)
+            _, (_, Jtr), _, _ = self._run_from(w, data, seg_len, "normal", X0, keep_state=False)
+            return Jtr
         Xs, Z, A, _ = state
         grad = np.zeros(len(w))
         issm_gradient(

@@ -1,0 +1,110 @@
+"""The ISSM's order from the data: ``n_states="auto"``.
+
+One subspace projection of the training records (:mod:`sysid_nn._subspace`)
+gives the singular values, which fall off after the system's order, and a
+linear innovation model of every candidate order (p up to :data:`MAX_ORDER`)
+at the cost of a few least-squares fits. Each candidate's free run from rest
+on the validation records (the training records when there are none) scores
+it. The rule, whose inputs are all kept in ``order_selection_``:
+
+* the *linear order* is the smallest candidate whose validation free-run
+  error is within :data:`ORDER_TOLERANCE` of the best candidate's;
+* the network gets :data:`EXTRA_STATES` states more than that, and at least
+  ``p + 2`` (a non-linearity needs states of its own: the hysteretic
+  component of the paper's oscillator is one).
+
+The singular values' largest gap (``gap_order``) is kept beside it as the
+subspace method's own proposal.
+"""
+
+from __future__ import annotations
+
+from itertools import pairwise
+
+import numpy as np
+from sklearn.utils import Bunch
+
+from sysid_nn._issm_start import subspace_horizon, subspace_records
+from sysid_nn._kernels._linear import linear_free_run
+from sysid_nn._subspace import output_error_model, projection
+
+#: Largest linear order tried.
+MAX_ORDER = 10
+#: Relative margin on the validation free-run error within which a smaller
+#: order is preferred to the best one.
+ORDER_TOLERANCE = 0.05
+#: States of the network beyond the linear order.
+EXTRA_STATES = 1
+
+
+def select_order(est, train, val) -> Bunch:
+    """Choose the number of states from ``train``, scored on ``val``.
+
+    ``est`` is the ISSM being fitted (standardisation and sizes set).
+    Returns the Bunch stored as ``order_selection_``: ``orders`` (the
+    candidates), ``scores`` (validation free-run NRMSE of their linear
+    models, ``inf`` for one that diverged), ``singular_values`` (of the
+    subspace projection, leading ones), ``gap_order`` (the order after which
+    the ratio of successive singular values is largest), ``linear_order``
+    and ``n_states`` (the rule above).
+    """
+    p = est.n_outputs_
+    top = MAX_ORDER
+    horizon = subspace_horizon(est, train, top)
+    while horizon == 0 and top > p:
+        top -= 1
+        horizon = subspace_horizon(est, train, top)
+    if horizon == 0:
+        raise ValueError(
+            'n_states="auto" needs longer training records: the subspace '
+            "projection it reads the order from needs windows of several "
+            "samples and more windows than coefficients. Use longer or more "
+            "records, or give n_states."
+        )
+    Y, U = subspace_records(est, train)
+    proj = projection(Y, U, horizon)
+    sv = proj.singular_values
+    orders = np.arange(p, min(top, len(sv) - 1) + 1)
+    scores = np.array([_score(est, output_error_model(Y, U, proj, n), val) for n in orders])
+    ratios = sv[orders - 1] / np.maximum(sv[orders], np.finfo(float).tiny)
+    gap_order = int(orders[np.argmax(ratios)])
+    best = np.min(scores)
+    good = orders[scores <= (1.0 + ORDER_TOLERANCE) * best] if np.isfinite(best) else orders
+    linear_order = int(good[0])
+    return Bunch(
+        orders=orders,
+        scores=scores,
+        singular_values=sv[: 2 * MAX_ORDER].copy(),
+        gap_order=gap_order,
+        linear_order=linear_order,
+        n_states=max(linear_order + EXTRA_STATES, p + 2),
+        tolerance=ORDER_TOLERANCE,
+    )
+
+
+def _score(est, lin: Bunch, data) -> float:
+    """Validation free-run NRMSE of a subspace model, from rest.
+
+    ``data`` are standardised stacked records; a validation tail
+    (``data.skip``) counts only after its training part.
+    """
+    n = lin.A.shape[0]
+    if np.abs(np.linalg.eigvals(lin.A)).max() >= 1.0:
+        return np.inf
+    Y, U = subspace_records(est, data)
+    u_rest = -est._x_mean / est._x_scale
+    x_rest = np.linalg.lstsq(np.eye(n) - lin.A, lin.B @ u_rest + lin.c, rcond=None)[0]
+    lead = max(0, est.input_delay - 1)  # modelled rows subspace_records drops
+    errors, targets = [], []
+    skip = data.skip
+    for y, u, (a, b) in zip(Y, U, pairwise(data.starts), strict=True):
+        Yhat = np.empty_like(y)
+        linear_free_run(lin.A, lin.B, lin.C, lin.c, u, x_rest, Yhat)
+        first = max(0, skip - lead)
+        errors.append(Yhat[first:] - y[first:])
+        targets.append(y[first:])
+        skip = max(0, skip - (b - a - data.h))
+    e, t = np.concatenate(errors), np.concatenate(targets)
+    if not np.all(np.isfinite(e)):
+        return np.inf
+    return float(np.mean(np.sqrt(np.mean(e**2, axis=0)) / np.maximum(t.std(axis=0), 1e-300)))
