@@ -8,7 +8,9 @@ on the validation records (the training records when there are none) scores
 it. The rule, whose inputs are all kept in ``order_selection_``:
 
 * the *linear order* is the smallest candidate whose validation free-run
-  error is within :data:`ORDER_TOLERANCE` of the best candidate's;
+  error is within :data:`ORDER_TOLERANCE` (plus :data:`ORDER_FLOOR`) of the
+  best candidate's (the
+  gap order when no candidate's free run is stable);
 * the network gets :data:`EXTRA_STATES` states more than that, and at least
   ``p + 2`` (a non-linearity needs states of its own: the hysteretic
   component of the paper's oscillator is one).
@@ -33,6 +35,8 @@ MAX_ORDER = 10
 #: Relative margin on the validation free-run error within which a smaller
 #: order is preferred to the best one.
 ORDER_TOLERANCE = 0.05
+#: NRMSE below which candidates count as equal (noise-free records).
+ORDER_FLOOR = 1e-3
 #: States of the network beyond the linear order.
 EXTRA_STATES = 1
 
@@ -69,8 +73,11 @@ def select_order(est, train, val) -> Bunch:
     ratios = sv[orders - 1] / np.maximum(sv[orders], np.finfo(float).tiny)
     gap_order = int(orders[np.argmax(ratios)])
     best = np.min(scores)
-    good = orders[scores <= (1.0 + ORDER_TOLERANCE) * best] if np.isfinite(best) else orders
-    linear_order = int(good[0])
+    if np.isfinite(best):
+        limit = (1.0 + ORDER_TOLERANCE) * best + ORDER_FLOOR
+        linear_order = int(orders[scores <= limit][0])
+    else:
+        linear_order = gap_order  # no candidate's free run was stable
     return Bunch(
         orders=orders,
         scores=scores,
@@ -79,6 +86,7 @@ def select_order(est, train, val) -> Bunch:
         linear_order=linear_order,
         n_states=max(linear_order + EXTRA_STATES, p + 2),
         tolerance=ORDER_TOLERANCE,
+        floor=ORDER_FLOOR,
     )
 
 

@@ -78,9 +78,10 @@ def projection(Y, U, horizon: int = HORIZON) -> Bunch:
     system's order: the gap reads the order from the data.
     """
     past, u_future, y_future = _windows(Y, U, horizon)
-    # Oblique projection of the future outputs along the future inputs
-    # onto the past: the least-squares coefficients of the past.
-    design = np.vstack([past, u_future])
+    # Oblique projection of the future outputs along the future inputs (and
+    # a constant, which would otherwise show as one more state) onto the
+    # past: the least-squares coefficients of the past.
+    design = np.vstack([past, u_future, np.ones((1, past.shape[1]))])
     coef = np.linalg.lstsq(design.T, y_future.T, rcond=None)[0].T
     L_past = coef[:, : past.shape[0]]
     left, sv, _ = np.linalg.svd(L_past @ past, full_matrices=False)

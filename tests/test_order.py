@@ -1,0 +1,110 @@
+"""Tests of the ISSM's order chosen from the data (``n_states="auto"``)."""
+
+from __future__ import annotations
+
+import warnings
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.model_selection import GridSearchCV, KFold
+
+from sysid_nn import ISSMRegressor
+from sysid_nn._order import ORDER_FLOOR, ORDER_TOLERANCE
+from sysid_nn.plotting import plot_order_selection
+
+#: Two resonances in cascade: a system of order 4.
+A1, A2 = [1.0, -1.6, 0.9], [1.0, -1.2, 0.75]
+
+
+def _fourth_order(n, seed, cubic=0.0):
+    """Records of the fourth-order system, with a mild cubic between its blocks."""
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(n)
+    v = lfilter([0.0, 0.3], A1, u)
+    v = v + cubic * v**3
+    return u[:, None], lfilter([0.0, 0.4], A2, v)
+
+
+def _linear_issm(**params):
+    return ISSMRegressor(hidden_layer_sizes=(), n_init=1, max_iter=20, random_state=0, **params)
+
+
+@pytest.mark.parametrize("cubic", [0.0, 0.05])
+def test_auto_order_finds_the_systems_order(cubic):
+    X, y = _fourth_order(3000, 0, cubic)
+    Xv, yv = _fourth_order(1000, 1, cubic)
+    model = _linear_issm().fit(X, y, X_val=Xv, y_val=yv)
+    sel = model.order_selection_
+    assert sel.linear_order == 4
+    assert sel.gap_order == 4
+    # Lower orders miss the dynamics; the chosen one is within the tolerance.
+    scores = dict(zip(sel.orders, sel.scores, strict=True))
+    assert scores[3] > 2 * scores[4]
+    assert scores[4] <= (1 + ORDER_TOLERANCE) * np.min(sel.scores) + ORDER_FLOOR
+    assert model.n_states_ == sel.n_states == 5
+    assert np.all(np.diff(sel.singular_values) <= 0)
+
+
+def test_auto_order_without_separate_validation_data():
+    X, y = _fourth_order(4000, 2)
+    model = _linear_issm().fit(X, y)
+    assert model.order_selection_.linear_order == 4
+
+
+def test_grid_search_over_orders_agrees_with_auto():
+    Xs, ys = zip(*(_fourth_order(800, seed) for seed in range(4)), strict=True)
+    Xs, ys = list(Xs), list(ys)
+    search = GridSearchCV(
+        _linear_issm(early_stopping=False), {"n_states": [2, 3, 4, 5, "auto"]}, cv=KFold(4)
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        search.fit(Xs, ys)
+    score = dict(
+        zip(search.cv_results_["param_n_states"], search.cv_results_["mean_test_score"], strict=True)
+    )
+    # Orders below the system's are clearly worse; from 4 on they agree.
+    assert score[3] < score[4] - 0.01
+    assert score[4] > search.best_score_ - 1e-3
+    assert score["auto"] > search.best_score_ - 1e-3
+    auto = _linear_issm(early_stopping=False).fit(Xs, ys)
+    assert auto.order_selection_.linear_order == 4
+
+
+def test_given_order_leaves_no_selection_behind():
+    X, y = _fourth_order(1500, 3)
+    model = _linear_issm().fit(X, y)
+    assert hasattr(model, "order_selection_")
+    model.set_params(n_states=2).fit(X, y)
+    assert not hasattr(model, "order_selection_")
+    assert model.n_states_ == 2
+
+
+def test_auto_width_grows_with_the_order():
+    X, y = _fourth_order(3000, 0)
+    model = ISSMRegressor(n_init=1, max_iter=2, random_state=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model.fit(X, y)
+    assert model.n_states_ == 5
+    assert model._sizes_[1:-1].tolist() == [12]
+
+
+def test_plot_order_selection_marks_the_choice():
+    X, y = _fourth_order(1500, 5)
+    model = _linear_issm(max_iter=200).fit(X, y)
+    fig = plot_order_selection(model)
+    top, bottom = fig.axes
+    assert top.get_yscale() == "log"
+    labels = [line.get_label() for line in bottom.get_lines()]
+    assert "linear order 4" in labels and "n_states 5" in labels
+    plt.close(fig)
+    with pytest.raises(ValueError, match="order_selection_"):
+        plot_order_selection(model.set_params(n_states=4, max_iter=200).fit(X, y))
