@@ -99,6 +99,15 @@ class ISSMRegressor(_RecurrentRegressorBase):
     pool seeds). On clean records, and with several outputs measured (which
     kept their accuracy under noise), the ARX start did better and is kept.
 
+    **Segment starts.** In the multiple-shooting stages every segment starts
+    from the state of the model's own one-step predictor (its innovation
+    filter, run beside the simulation over the record so far), the
+    unmeasured states included, and the sensitivities run through the
+    filter, so the gradient is exact. The first segment of each record is
+    the filter's burn-in. Segments then are independent of each other, and
+    the stages before the free run are evaluated on a random subset of
+    blocks of segments on long records (see ``sysid_nn._schedule``).
+
     **Stable predictor.** Simulation-focused training barely constrains the
     weights acting on the innovations (they do not enter the free run). After
     such a fit they are refitted on the one-step prediction error, starting
@@ -120,19 +129,27 @@ class ISSMRegressor(_RecurrentRegressorBase):
 
     Parameters
     ----------
-    n_states : int or None, default=None
+    n_states : "auto", int or None, default="auto"
         Number of states ``n``, at least the number of outputs ``p``.
-        ``None`` uses ``p + 2``: two states beyond the measured ones (4 for
-        displacement and velocity measured, 3 for displacement alone). On the
-        hysteretic oscillator with displacement and velocity measured, 4
-        states halved the free-run error of the paper's 3 (accuracy
-        benchmark).
+        ``"auto"`` reads the order from the data: the smallest order whose
+        linear (subspace) model's validation free run is within 5 % of the
+        best of the orders ``p`` to 10 is the linear order, and the network
+        gets one state more, at least ``p + 2``; the evidence is kept in
+        ``order_selection_`` and drawn by
+        :func:`~sysid_nn.plotting.plot_order_selection`. ``None`` uses ``p +
+        2``: two states beyond the measured ones (4 for displacement and
+        velocity measured, 3 for displacement alone). On the hysteretic
+        oscillator with displacement and velocity measured, 4 states halved
+        the free-run error of the paper's 3 (accuracy benchmark).
     input_delay : int, default=1
         Delay ``n_k`` of the excitation seen by the network; 0 gives direct
         feed-through of ``F(t)``.
-    hidden_layer_sizes : int or tuple of int, default=(7,)
+    hidden_layer_sizes : "auto", int or tuple of int, default="auto"
         Sizes of the hidden layers (an int is one layer, as in
         ``MLPRegressor``); ``()`` gives the linear innovation model.
+        ``"auto"``: one layer of ``max(7, int(2.5 n_states))`` units (7 up
+        to 3 states, 15 at 6, the width of the best published networks of
+        that order).
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_part : bool, default=True
@@ -189,6 +206,17 @@ class ISSMRegressor(_RecurrentRegressorBase):
         Number of measured outputs ``p``.
     init_ : {"arx", "subspace", "tdl"}
         The start of the chosen restart (``init`` with ``"auto"`` resolved).
+    order_selection_ : Bunch
+        With ``n_states="auto"`` only: the evidence for the order.
+        ``orders`` (the candidates), ``scores`` (validation free-run NRMSE
+        of their linear models, standardised units, ``inf`` for an unstable
+        one), ``singular_values`` (leading singular values of the subspace
+        projection), ``gap_order`` (the order after their largest ratio),
+        ``linear_order`` and ``n_states`` (the rule of ``n_states``),
+        ``tolerance`` and ``floor`` (its relative and absolute margins).
+    shooting_ : {"filter", "measured"}
+        How the multiple-shooting segments of the simulation focus start:
+        from the model's own one-step predictor (see "Segment starts").
     linear_model_ : Bunch
         The linear starting model ``A, B, K, c`` in the internal state
         coordinates (standardised units).
@@ -423,7 +451,10 @@ default=None
         self.n_states_ = int(self.n_states) if self.n_states is not None else p + 2
 
     def _hidden_layers(self) -> tuple:
-        if not (isinstance(self.hidden_layer_sizes, str) and self.hidden_layer_sizes == "auto"):
+        if not (
+            isinstance(self.hidden_layer_sizes, str)
+            and self.hidden_layer_sizes == "auto"
+        ):
             return super()._hidden_layers()
         # One layer whose width grows with the order (7 up to 3 states, 15 at
         # 6: the width of the best published networks of that order).
@@ -538,7 +569,9 @@ default=None
         # realised TDL network (_issm_realisation).
         self.__dict__.pop("order_selection_", None)  # from an earlier fit
         if self.n_states == "auto" and self.init != "tdl":
-            self.order_selection_ = select_order(self, data, data if val is None else val)
+            self.order_selection_ = select_order(
+                self, data, data if val is None else val
+            )
             self.n_states_ = int(self.order_selection_.n_states)
         self._sizes_ = self._sizes()
         self._act = ACTIVATIONS[self.activation]
@@ -692,7 +725,9 @@ default=None
         if self._filtered(seg_len):
             # No adjoint pass through the filter: J'r of the same run.
             X0 = self._initial_states(data)
-            _, (_, Jtr), _, _ = self._run_from(w, data, seg_len, "normal", X0, keep_state=False)
+            _, (_, Jtr), _, _ = self._run_from(
+                w, data, seg_len, "normal", X0, keep_state=False
+            )
             return Jtr
         Xs, Z, A, _ = state
         grad = np.zeros(len(w))

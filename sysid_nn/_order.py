@@ -69,7 +69,9 @@ def select_order(est, train, val) -> Bunch:
     proj = projection(Y, U, horizon)
     sv = proj.singular_values
     orders = np.arange(p, min(top, len(sv) - 1) + 1)
-    scores = np.array([_score(est, output_error_model(Y, U, proj, n), val) for n in orders])
+    scores = np.array(
+        [_score(est, output_error_model(Y, U, proj, n), val) for n in orders]
+    )
     ratios = sv[orders - 1] / np.maximum(sv[orders], np.finfo(float).tiny)
     gap_order = int(orders[np.argmax(ratios)])
     best = np.min(scores)
@@ -115,4 +117,6 @@ def _score(est, lin: Bunch, data) -> float:
     e, t = np.concatenate(errors), np.concatenate(targets)
     if not np.all(np.isfinite(e)):
         return np.inf
-    return float(np.mean(np.sqrt(np.mean(e**2, axis=0)) / np.maximum(t.std(axis=0), 1e-300)))
+    return float(
+        np.mean(np.sqrt(np.mean(e**2, axis=0)) / np.maximum(t.std(axis=0), 1e-300))
+    )

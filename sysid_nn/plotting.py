@@ -690,11 +690,21 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
     sv = np.asarray(selection.singular_values, dtype=float)
     orders = np.arange(1, len(sv) + 1)
     top.semilogy(orders, sv / sv[0], "o-", linewidth=1.0)
-    top.axvline(selection.gap_order + 0.5, label=f"gap after {selection.gap_order}", **_BAND_STYLE)
+    top.axvline(
+        selection.gap_order + 0.5,
+        label=f"gap after {selection.gap_order}",
+        **_BAND_STYLE,
+    )
     _finish(top, "index", "singular value / largest", "Subspace singular values")
     scores = np.asarray(selection.scores, dtype=float)
     finite = np.isfinite(scores)
-    bottom.plot(selection.orders[finite], scores[finite], "o-", linewidth=1.0, label="linear model")
+    bottom.plot(
+        selection.orders[finite],
+        scores[finite],
+        "o-",
+        linewidth=1.0,
+        label="linear model",
+    )
     if finite.any():
         bottom.axhline(
             (1.0 + selection.tolerance) * scores[finite].min() + selection.floor,
@@ -702,10 +712,15 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
             **_BAND_STYLE,
         )
     bottom.axvline(
-        selection.linear_order, color="C1", label=f"linear order {selection.linear_order}"
+        selection.linear_order,
+        color="C1",
+        label=f"linear order {selection.linear_order}",
     )
     bottom.axvline(
-        selection.n_states, color="C2", linestyle="--", label=f"n_states {selection.n_states}"
+        selection.n_states,
+        color="C2",
+        linestyle="--",
+        label=f"n_states {selection.n_states}",
     )
     _finish(bottom, "order", "validation NRMSE", "Free run of the linear models")
     top.figure.tight_layout()

@@ -33,7 +33,9 @@ def _fourth_order(n, seed, cubic=0.0):
 
 
 def _linear_issm(**params):
-    return ISSMRegressor(hidden_layer_sizes=(), n_init=1, max_iter=20, random_state=0, **params)
+    return ISSMRegressor(
+        hidden_layer_sizes=(), n_init=1, max_iter=20, random_state=0, **params
+    )
 
 
 @pytest.mark.parametrize("cubic", [0.0, 0.05])
@@ -62,13 +64,19 @@ def test_grid_search_over_orders_agrees_with_auto():
     Xs, ys = zip(*(_fourth_order(800, seed) for seed in range(4)), strict=True)
     Xs, ys = list(Xs), list(ys)
     search = GridSearchCV(
-        _linear_issm(early_stopping=False), {"n_states": [2, 3, 4, 5, "auto"]}, cv=KFold(4)
+        _linear_issm(early_stopping=False),
+        {"n_states": [2, 3, 4, 5, "auto"]},
+        cv=KFold(4),
     )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         search.fit(Xs, ys)
     score = dict(
-        zip(search.cv_results_["param_n_states"], search.cv_results_["mean_test_score"], strict=True)
+        zip(
+            search.cv_results_["param_n_states"],
+            search.cv_results_["mean_test_score"],
+            strict=True,
+        )
     )
     # Orders below the system's are clearly worse; from 4 on they agree.
     assert score[3] < score[4] - 0.01
