@@ -134,7 +134,9 @@ class ISSMRegressor(_RecurrentRegressorBase):
         ``"auto"`` reads the order from the data: the smallest order whose
         linear (subspace) model's validation free run is within 5 % of the
         best of the orders ``p`` to 10 is the linear order, and the network
-        gets one state more, at least ``p + 2``; the evidence is kept in
+        gets twice as many states, at least ``p + 2`` (where no linear model
+        explains the records, the order after the largest gap of the
+        subspace singular values, at least ``p + 2``); the evidence is kept in
         ``order_selection_`` and drawn by
         :func:`~sysid_nn.plotting.plot_order_selection`. ``None`` uses ``p +
         2``: two states beyond the measured ones (4 for displacement and

@@ -9,14 +9,17 @@ it. The rule, whose inputs are all kept in ``order_selection_``:
 
 * the *linear order* is the smallest candidate whose validation free-run
   error is within :data:`ORDER_TOLERANCE` (plus :data:`ORDER_FLOOR`) of the
-  best candidate's (the
-  gap order when no candidate's free run is stable);
-* the network gets :data:`EXTRA_STATES` states more than that, and at least
-  ``p + 2`` (a non-linearity needs states of its own: the hysteretic
-  component of the paper's oscillator is one).
+  best candidate's;
+* the network gets :data:`STATE_FACTOR` times as many states, and at least
+  ``p + 2``: on a non-linear system the linear models' free run is limited
+  by what they miss, which hides the slower part of the dynamics (on the
+  Wiener-Hammerstein benchmark, two third-order blocks, the linear order
+  came out 3; 4 states gave a test error of 8.0 mV, 6 states 0.49 mV);
+* where no linear model explains the records (best NRMSE above
+  :data:`RELIABLE_NRMSE`, or none stable: the hysteretic oscillator's drift,
+  an integrator), the order is the singular values' largest gap
+  (``gap_order``), at least ``p + 2``.
 
-The singular values' largest gap (``gap_order``) is kept beside it as the
-subspace method's own proposal.
 """
 
 from __future__ import annotations
@@ -37,8 +40,11 @@ MAX_ORDER = 10
 ORDER_TOLERANCE = 0.05
 #: NRMSE below which candidates count as equal (noise-free records).
 ORDER_FLOOR = 1e-3
-#: States of the network beyond the linear order.
-EXTRA_STATES = 1
+#: States of the network per state of the linear order.
+STATE_FACTOR = 2
+#: Validation NRMSE of the best linear model above which its order is not
+#: read from the linear models' free run.
+RELIABLE_NRMSE = 0.5
 
 
 def select_order(est, train, val) -> Bunch:
@@ -50,7 +56,9 @@ def select_order(est, train, val) -> Bunch:
     models, ``inf`` for one that diverged), ``singular_values`` (of the
     subspace projection, leading ones), ``gap_order`` (the order after which
     the ratio of successive singular values is largest), ``linear_order``
-    and ``n_states`` (the rule above).
+    (the gap order when no candidate is stable) and ``n_states`` (the rule
+    above), and the rule's constants ``tolerance``, ``floor`` and
+    ``reliable``.
     """
     p = est.n_outputs_
     top = MAX_ORDER
@@ -75,20 +83,22 @@ def select_order(est, train, val) -> Bunch:
     ratios = sv[orders - 1] / np.maximum(sv[orders], np.finfo(float).tiny)
     gap_order = int(orders[np.argmax(ratios)])
     best = np.min(scores)
-    if np.isfinite(best):
-        limit = (1.0 + ORDER_TOLERANCE) * best + ORDER_FLOOR
-        linear_order = int(orders[scores <= limit][0])
+    limit = (1.0 + ORDER_TOLERANCE) * best + ORDER_FLOOR
+    linear_order = int(orders[scores <= limit][0]) if np.isfinite(best) else gap_order
+    if best <= RELIABLE_NRMSE:
+        n_states = max(STATE_FACTOR * linear_order, p + 2)
     else:
-        linear_order = gap_order  # no candidate's free run was stable
+        n_states = max(gap_order, p + 2)
     return Bunch(
         orders=orders,
         scores=scores,
         singular_values=sv[: 2 * MAX_ORDER].copy(),
         gap_order=gap_order,
         linear_order=linear_order,
-        n_states=max(linear_order + EXTRA_STATES, p + 2),
+        n_states=int(n_states),
         tolerance=ORDER_TOLERANCE,
         floor=ORDER_FLOOR,
+        reliable=RELIABLE_NRMSE,
     )
 
 

@@ -33,9 +33,8 @@ def _fourth_order(n, seed, cubic=0.0):
 
 
 def _linear_issm(**params):
-    return ISSMRegressor(
-        hidden_layer_sizes=(), n_init=1, max_iter=20, random_state=0, **params
-    )
+    settings = {"n_init": 1, "max_iter": 20, "random_state": 0, **params}
+    return ISSMRegressor(hidden_layer_sizes=(), **settings)
 
 
 @pytest.mark.parametrize("cubic", [0.0, 0.05])
@@ -50,7 +49,8 @@ def test_auto_order_finds_the_systems_order(cubic):
     scores = dict(zip(sel.orders, sel.scores, strict=True))
     assert scores[3] > 2 * scores[4]
     assert scores[4] <= (1 + ORDER_TOLERANCE) * np.min(sel.scores) + ORDER_FLOOR
-    assert model.n_states_ == sel.n_states == 5
+    # The network doubles the linear order (see sysid_nn._order).
+    assert model.n_states_ == sel.n_states == 8
     assert np.all(np.diff(sel.singular_values) <= 0)
 
 
@@ -86,6 +86,17 @@ def test_grid_search_over_orders_agrees_with_auto():
     assert auto.order_selection_.linear_order == 4
 
 
+def test_unexplained_records_take_the_singular_value_gap():
+    # An even non-linearity after a filter: no linear model explains it.
+    rng = np.random.default_rng(6)
+    u = rng.standard_normal((3000, 1))
+    y = lfilter([0.0, 0.3], [1.0, -1.2, 0.5], u[:, 0]) ** 2
+    model = _linear_issm(max_iter=200).fit(u, y)
+    sel = model.order_selection_
+    assert not np.min(sel.scores) <= sel.reliable
+    assert sel.n_states == max(sel.gap_order, 3)
+
+
 def test_given_order_leaves_no_selection_behind():
     X, y = _fourth_order(1500, 3)
     model = _linear_issm().fit(X, y)
@@ -101,8 +112,8 @@ def test_auto_width_grows_with_the_order():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         model.fit(X, y)
-    assert model.n_states_ == 5
-    assert model._sizes_[1:-1].tolist() == [12]
+    assert model.n_states_ == 8
+    assert model._sizes_[1:-1].tolist() == [20]
 
 
 def test_plot_order_selection_marks_the_choice():
@@ -112,7 +123,7 @@ def test_plot_order_selection_marks_the_choice():
     top, bottom = fig.axes
     assert top.get_yscale() == "log"
     labels = [line.get_label() for line in bottom.get_lines()]
-    assert "linear order 4" in labels and "n_states 5" in labels
+    assert "linear order 4" in labels and "n_states 8" in labels
     plt.close(fig)
     with pytest.raises(ValueError, match="order_selection_"):
         plot_order_selection(model.set_params(n_states=4, max_iter=200).fit(X, y))
