@@ -25,12 +25,9 @@ from sysid_nn._issm_start import (
 from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_run
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
-from sysid_nn._order import select_order
+from sysid_nn._order import auto_width, select_order
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]
-
-#: Smallest hidden width of ``hidden_layer_sizes="auto"``.
-AUTO_WIDTH = 7
 
 
 @document_estimator
@@ -119,10 +116,10 @@ class ISSMRegressor(_RecurrentRegressorBase):
     training data) warns :class:`UnstablePredictorWarning`.
 
     The defaults are the setting that identified the hysteretic oscillator
-    best on unseen realisations: the linear part at the ARX-derived model,
-    measured outputs as states plus one unmeasured state, free-run
+    best on unseen realisations, with the order and width read from the
+    data (see ``n_states``): the linear part at the ARX-derived model, free-run
     ("simulation") focus reached through a one-step stage and multiple
-    shooting (measured states reset at each segment start), validation
+    shooting (segments started from the one-step predictor), validation
     selection over four restarts. The paper's network is
     ``ISSMRegressor(n_states=3, hidden_layer_sizes=(7,), focus="prediction",
     linear_part=False, activation="logistic")``.
@@ -188,8 +185,8 @@ class ISSMRegressor(_RecurrentRegressorBase):
         full free run).
     shooting_segments : tuple of int, default=(20, 100, 400)
         Segment lengths (samples) of the multiple-shooting stages of the
-        simulation focus; at each segment start the measured states restart
-        from the measured outputs while the unmeasured ones carry over.
+        simulation focus; each segment starts from the state of the model's
+        own one-step predictor (see "Segment starts").
     alpha : float or "auto", default=0.0
         L2 penalty on the network weights (not on biases or the linear part);
         ``"auto"`` is none for the ISSM. The value used is in ``alpha_``.
@@ -458,10 +455,7 @@ default=None
             and self.hidden_layer_sizes == "auto"
         ):
             return super()._hidden_layers()
-        # One layer whose width grows with the order (7 up to 3 states, 15 at
-        # 6: the width of the best published networks of that order).
-        n = getattr(self, "n_states_", 3)
-        return (max(AUTO_WIDTH, int(2.5 * n)),)
+        return (auto_width(getattr(self, "n_states_", 3)),)
 
     def _sizes(self) -> np.ndarray:
         n = self.n_states_

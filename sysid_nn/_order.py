@@ -15,6 +15,9 @@ it. The rule, whose inputs are all kept in ``order_selection_``:
   by what they miss, which hides the slower part of the dynamics (on the
   Wiener-Hammerstein benchmark, two third-order blocks, the linear order
   came out 3; 4 states gave a test error of 8.0 mV, 6 states 0.49 mV);
+* on short records the order is lowered until the auto-sized network has
+  at most one weight per :data:`SAMPLES_PER_WEIGHT` training samples, down
+  to ``p + 2``;
 * where no linear model explains the records (best NRMSE above
   :data:`RELIABLE_NRMSE`, or none stable: the hysteretic oscillator's drift,
   an integrator), the order is the singular values' largest gap
@@ -42,6 +45,11 @@ ORDER_TOLERANCE = 0.05
 ORDER_FLOOR = 1e-3
 #: States of the network per state of the linear order.
 STATE_FACTOR = 2
+#: Training samples (times outputs) per weight of the network below which
+#: the order is lowered (down to ``p + 2``).
+SAMPLES_PER_WEIGHT = 10
+#: Smallest hidden width of ``hidden_layer_sizes="auto"``.
+AUTO_WIDTH = 7
 #: Validation NRMSE of the best linear model above which its order is not
 #: read from the linear models' free run.
 RELIABLE_NRMSE = 0.5
@@ -89,6 +97,12 @@ def select_order(est, train, val) -> Bunch:
         n_states = max(STATE_FACTOR * linear_order, p + 2)
     else:
         n_states = max(gap_order, p + 2)
+    # Short records: no more weights than a tenth of the training samples.
+    n_samples = len(train.modelled) * p
+    while (
+        n_states > p + 2 and _n_weights(est, n_states) * SAMPLES_PER_WEIGHT > n_samples
+    ):
+        n_states -= 1
     return Bunch(
         orders=orders,
         scores=scores,
@@ -100,6 +114,22 @@ def select_order(est, train, val) -> Bunch:
         floor=ORDER_FLOOR,
         reliable=RELIABLE_NRMSE,
     )
+
+
+def auto_width(n_states: int) -> int:
+    """Hidden width of ``hidden_layer_sizes="auto"`` for ``n_states`` states.
+
+    7 up to 3 states, 15 at 6: the width of the best published networks of
+    that order.
+    """
+    return max(AUTO_WIDTH, int(2.5 * n_states))
+
+
+def _n_weights(est, n: int) -> int:
+    """Weights of the auto-sized network with ``n`` states and its linear part."""
+    n_z = n + est.n_features_in_ + est.n_outputs_
+    width = auto_width(n)
+    return n_z * width + width + width * n + n + n * n_z
 
 
 def _score(est, lin: Bunch, data) -> float:

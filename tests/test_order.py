@@ -19,6 +19,9 @@ from sysid_nn import ISSMRegressor
 from sysid_nn._order import ORDER_FLOOR, ORDER_TOLERANCE
 from sysid_nn.plotting import plot_order_selection
 
+# Short training budgets: the order, not the fit, is under test.
+pytestmark = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+
 #: Two resonances in cascade: a system of order 4.
 A1, A2 = [1.0, -1.6, 0.9], [1.0, -1.2, 0.75]
 
@@ -39,7 +42,7 @@ def _linear_issm(**params):
 
 @pytest.mark.parametrize("cubic", [0.0, 0.05])
 def test_auto_order_finds_the_systems_order(cubic):
-    X, y = _fourth_order(3000, 0, cubic)
+    X, y = _fourth_order(5000, 0, cubic)
     Xv, yv = _fourth_order(1000, 1, cubic)
     model = _linear_issm().fit(X, y, X_val=Xv, y_val=yv)
     sel = model.order_selection_
@@ -97,6 +100,18 @@ def test_unexplained_records_take_the_singular_value_gap():
     assert sel.n_states == max(sel.gap_order, 3)
 
 
+def test_short_records_lower_the_order():
+    X, y = _fourth_order(5000, 0)
+    long = _linear_issm().fit(X, y, X_val=X[:1000], y_val=y[:1000])
+    short = _linear_issm().fit(X[:3000], y[:3000], X_val=X[:1000], y_val=y[:1000])
+    assert (
+        long.order_selection_.linear_order == short.order_selection_.linear_order == 4
+    )
+    assert long.n_states_ == 8
+    # At most one weight per ten samples: 6 states (279 weights) on 3000.
+    assert short.n_states_ == 6
+
+
 def test_given_order_leaves_no_selection_behind():
     X, y = _fourth_order(1500, 3)
     model = _linear_issm().fit(X, y)
@@ -107,7 +122,7 @@ def test_given_order_leaves_no_selection_behind():
 
 
 def test_auto_width_grows_with_the_order():
-    X, y = _fourth_order(3000, 0)
+    X, y = _fourth_order(6000, 0)
     model = ISSMRegressor(n_init=1, max_iter=2, random_state=0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
@@ -123,7 +138,8 @@ def test_plot_order_selection_marks_the_choice():
     top, bottom = fig.axes
     assert top.get_yscale() == "log"
     labels = [line.get_label() for line in bottom.get_lines()]
-    assert "linear order 4" in labels and "n_states 8" in labels
+    n = model.order_selection_.n_states
+    assert "linear order 4" in labels and f"n_states {n}" in labels
     plt.close(fig)
     with pytest.raises(ValueError, match="order_selection_"):
         plot_order_selection(model.set_params(n_states=4, max_iter=200).fit(X, y))

@@ -48,6 +48,14 @@ def _network_input(x, U, t, nk, e, z):
 
 
 @njit(cache=True, inline="always")
+def _advance(w, sizes, act, bypass, x, U, t, nk, e, z, acts, out, bound):
+    """One step of the network from state ``x``; True if it left the range."""
+    _network_input(x, U, t, nk, e, z)
+    mlp_forward(w, sizes, act, bypass, z, acts, out)
+    return out_of_range(out, bound)
+
+
+@njit(cache=True, inline="always")
 def _sensitivity_step(
     w, sizes, act, bypass, z, acts, predictor, want_jac, want_lin, t, D,
     psi_prev, psi, v, lam, gz, coef, d1, d2, n, m, p,
@@ -138,9 +146,9 @@ def _loop(
             if filt:
                 for k in range(p):
                     e[k] = Y[t - 1, k] - xf[k]
-                _network_input(xf, U, t, nk, e, z)
-                mlp_forward(w, sizes, act, bypass, z, acts, out)
-                if out_of_range(out, bound):
+                if _advance(
+                    w, sizes, act, bypass, xf, U, t, nk, e, z, acts, out, bound
+                ):
                     diverged[s] = k_local
                     rec.fill_rows(Xs, t, b, np.full(n, np.nan))
                     break
@@ -168,9 +176,7 @@ def _loop(
                         e[k] = Y[t - 1, k] - x[k]
                 else:
                     e[:] = 0.0
-                _network_input(x, U, t, nk, e, z)
-                mlp_forward(w, sizes, act, bypass, z, acts, out)
-                if out_of_range(out, bound):
+                if _advance(w, sizes, act, bypass, x, U, t, nk, e, z, acts, out, bound):
                     diverged[s] = k_local
                     rec.fill_rows(Xs, t, b, np.full(n, np.nan))
                     break
