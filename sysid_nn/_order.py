@@ -15,6 +15,8 @@ it. The rule, whose inputs are all kept in ``order_selection_``:
   by what they miss, which hides the slower part of the dynamics (on the
   Wiener-Hammerstein benchmark, two third-order blocks, the linear order
   came out 3; 4 states gave a test error of 8.0 mV, 6 states 0.49 mV);
+* records too short for the projection get ``p + 2`` states (empty
+  evidence);
 * on short records the order is lowered until the auto-sized network has
   at most one weight per :data:`SAMPLES_PER_WEIGHT` training samples, down
   to ``p + 2``;
@@ -75,12 +77,13 @@ def select_order(est, train, val) -> Bunch:
         top -= 1
         horizon = subspace_horizon(est, train, top)
     if horizon == 0:
-        raise ValueError(
-            'n_states="auto" needs longer training records: the subspace '
-            "projection it reads the order from needs windows of several "
-            "samples and more windows than coefficients. Use longer or more "
-            "records, or give n_states."
-        )
+        # Too short for a projection: the former default, and no evidence.
+        empty = np.array([], dtype=float)
+        return Bunch(
+            orders=np.array([], dtype=int), scores=empty, singular_values=empty,
+            gap_order=None, linear_order=None, n_states=p + 2,
+            tolerance=ORDER_TOLERANCE, floor=ORDER_FLOOR, reliable=RELIABLE_NRMSE,
+        )  # fmt: skip
     Y, U = subspace_records(est, train)
     proj = projection(Y, U, horizon)
     sv = proj.singular_values
@@ -116,19 +119,20 @@ def select_order(est, train, val) -> Bunch:
     )
 
 
-def auto_width(n_states: int) -> int:
-    """Hidden width of ``hidden_layer_sizes="auto"`` for ``n_states`` states.
+def auto_width(n_states: int, n_outputs: int) -> int:
+    """Hidden width of ``hidden_layer_sizes="auto"``.
 
-    7 up to 3 states, 15 at 6: the width of the best published networks of
-    that order.
+    Three units per unmeasured state, at least 7: 7 for the paper's
+    oscillator (two unmeasured states), 15 for 6 states and one output, the
+    width of the best published networks of that order.
     """
-    return max(AUTO_WIDTH, int(2.5 * n_states))
+    return max(AUTO_WIDTH, 3 * (n_states - n_outputs))
 
 
 def _n_weights(est, n: int) -> int:
     """Weights of the auto-sized network with ``n`` states and its linear part."""
     n_z = n + est.n_features_in_ + est.n_outputs_
-    width = auto_width(n)
+    width = auto_width(n, est.n_outputs_)
     return n_z * width + width + width * n + n + n * n_z
 
 

@@ -681,10 +681,11 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
     >>> plt.close(fig)
     """
     selection = getattr(estimator, "order_selection_", None)
-    if selection is None:
+    if selection is None or selection.linear_order is None:
         raise ValueError(
-            "estimator has no order_selection_: fit an ISSMRegressor with "
-            'n_states="auto" first.'
+            "estimator has no order selection to draw: fit an ISSMRegressor "
+            'with n_states="auto" on records long enough for it (see '
+            "order_selection_) first."
         )
     top, bottom = _new_panels(ax, 2, figsize=(6.4, 6.4))
     sv = np.asarray(selection.singular_values, dtype=float)

@@ -16,7 +16,12 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, KFold
 
 from sysid_nn import ISSMRegressor
-from sysid_nn._order import ORDER_FLOOR, ORDER_TOLERANCE
+from sysid_nn._order import (
+    ORDER_FLOOR,
+    ORDER_TOLERANCE,
+    SAMPLES_PER_WEIGHT,
+    _n_weights,
+)
 from sysid_nn.plotting import plot_order_selection
 
 # Short training budgets: the order, not the fit, is under test.
@@ -103,13 +108,24 @@ def test_unexplained_records_take_the_singular_value_gap():
 def test_short_records_lower_the_order():
     X, y = _fourth_order(5000, 0)
     long = _linear_issm().fit(X, y, X_val=X[:1000], y_val=y[:1000])
-    short = _linear_issm().fit(X[:3000], y[:3000], X_val=X[:1000], y_val=y[:1000])
+    short = _linear_issm().fit(X[:2000], y[:2000], X_val=X[:1000], y_val=y[:1000])
     assert (
         long.order_selection_.linear_order == short.order_selection_.linear_order == 4
     )
     assert long.n_states_ == 8
-    # At most one weight per ten samples: 6 states (279 weights) on 3000.
-    assert short.n_states_ == 6
+    # At most one weight per ten samples for the auto-sized network.
+    n = short.n_states_
+    assert 3 <= n < 8
+    assert SAMPLES_PER_WEIGHT * _n_weights(short, n) <= 2000
+    assert SAMPLES_PER_WEIGHT * _n_weights(short, n + 1) > 2000
+
+
+def test_records_too_short_for_the_projection_keep_p_plus_2():
+    X, y = _fourth_order(12, 7)
+    model = _linear_issm(early_stopping=False).fit(X, y)
+    assert model.n_states_ == 3
+    assert model.order_selection_.linear_order is None
+    assert len(model.order_selection_.scores) == 0
 
 
 def test_given_order_leaves_no_selection_behind():
@@ -121,14 +137,17 @@ def test_given_order_leaves_no_selection_behind():
     assert model.n_states_ == 2
 
 
-def test_auto_width_grows_with_the_order():
+def test_auto_width_and_segment_starts_follow_the_order():
     X, y = _fourth_order(6000, 0)
-    model = ISSMRegressor(n_init=1, max_iter=2, random_state=0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        model.fit(X, y)
-    assert model.n_states_ == 8
-    assert model._sizes_[1:-1].tolist() == [20]
+    model = ISSMRegressor(n_init=1, max_iter=2, random_state=0).fit(X, y)
+    n = model.n_states_
+    assert n == model.order_selection_.n_states > 5
+    # Three hidden units per unmeasured state; segments from the filter.
+    assert model._sizes_[1:-1].tolist() == [3 * (n - 1)]
+    assert model.shooting_ == "filter"
+    few = ISSMRegressor(n_states=3, n_init=1, max_iter=2, random_state=0).fit(X, y)
+    assert few._sizes_[1:-1].tolist() == [7]
+    assert few.shooting_ == "measured"
 
 
 def test_plot_order_selection_marks_the_choice():
@@ -141,5 +160,5 @@ def test_plot_order_selection_marks_the_choice():
     n = model.order_selection_.n_states
     assert "linear order 4" in labels and f"n_states {n}" in labels
     plt.close(fig)
-    with pytest.raises(ValueError, match="order_selection_"):
+    with pytest.raises(ValueError, match="no order selection"):
         plot_order_selection(model.set_params(n_states=4, max_iter=200).fit(X, y))
