@@ -26,6 +26,7 @@ from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_ru
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden, n_params
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._order import auto_width, select_order
+from sysid_nn._tdl import TDLRegressor
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]
 
@@ -155,7 +156,8 @@ class ISSMRegressor(_RecurrentRegressorBase):
         ``MLPRegressor``); ``()`` gives the linear innovation model.
         ``"auto"``: one layer of three units per unmeasured state, at least
         7 (7 for the paper's oscillator, 15 for 6 states and one output, the
-        width of the best published networks of that order).
+        width of the best published networks of that order); with
+        ``init="tdl"`` the TDL network's default.
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_part : bool, default=True
@@ -464,6 +466,8 @@ default=None
             and self.hidden_layer_sizes == "auto"
         ):
             return super()._hidden_layers()
+        if self.init == "tdl":
+            return TDLRegressor()._hidden_layers()  # the realised network's
         p = getattr(self, "n_outputs_", 1)
         return (auto_width(getattr(self, "n_states_", p + 2), p),)
 
