@@ -85,7 +85,7 @@ def select_order(est, train, val) -> Bunch:
             tolerance=ORDER_TOLERANCE, floor=ORDER_FLOOR, reliable=RELIABLE_NRMSE,
         )  # fmt: skip
     Y, U = subspace_records(est, train)
-    proj = projection(Y, U, horizon)
+    proj = projection(Y, U, horizon, constant=True)
     sv = proj.singular_values
     orders = np.arange(p, min(top, len(sv) - 1) + 1)
     scores = np.array(

@@ -69,19 +69,21 @@ def subspace_model(Y, U, n: int, horizon: int = HORIZON) -> Bunch:
     return model_of_order(Y, U, projection(Y, U, horizon), n)
 
 
-def projection(Y, U, horizon: int = HORIZON) -> Bunch:
+def projection(Y, U, horizon: int = HORIZON, constant: bool = False) -> Bunch:
     """The oblique projection shared by the models of every order.
 
     Returns a Bunch with ``L_past`` (the future outputs' coefficients on
     the past windows), ``left`` and ``singular_values`` (its SVD along the
     past windows) and ``horizon``. The singular values fall off after the
-    system's order: the gap reads the order from the data.
+    system's order: the gap reads the order from the data. With
+    ``constant``, the projection is also along a constant, which otherwise
+    shows as one more state (an offset of the records).
     """
     past, u_future, y_future = _windows(Y, U, horizon)
-    # Oblique projection of the future outputs along the future inputs (and
-    # a constant, which would otherwise show as one more state) onto the
-    # past: the least-squares coefficients of the past.
-    design = np.vstack([past, u_future, np.ones((1, past.shape[1]))])
+    # Oblique projection of the future outputs along the future inputs onto
+    # the past: the least-squares coefficients of the past.
+    along = [u_future, np.ones((1, past.shape[1]))] if constant else [u_future]
+    design = np.vstack([past, *along])
     coef = np.linalg.lstsq(design.T, y_future.T, rcond=None)[0].T
     L_past = coef[:, : past.shape[0]]
     left, sv, _ = np.linalg.svd(L_past @ past, full_matrices=False)
