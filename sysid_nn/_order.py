@@ -53,8 +53,9 @@ SAMPLES_PER_WEIGHT = 10
 #: Smallest hidden width of ``hidden_layer_sizes="auto"``.
 AUTO_WIDTH = 7
 #: Validation NRMSE of the best linear model above which its order is not
-#: read from the linear models' free run.
-RELIABLE_NRMSE = 0.5
+#: read from the linear models' free run (R^2 0.84; the hysteretic
+#: oscillator's linear models reach 0.46-0.96, the field's 0.11-0.17).
+RELIABLE_NRMSE = 0.4
 
 
 def select_order(est, train, val) -> Bunch:
