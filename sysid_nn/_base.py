@@ -113,8 +113,13 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
     def _history_length(self) -> int:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _prepare_structure(self, data: _Data) -> None:  # pragma: no cover
-        """Fix data-dependent structure and the linear starting point."""
+    def _prepare_structure(
+        self, data: _Data, val: _Data | None = None
+    ) -> None:  # pragma: no cover
+        """Fix data-dependent structure and the linear starting point.
+
+        ``val`` are the validation records, when there are any.
+        """
         raise NotImplementedError
 
     def _initial_params(
@@ -266,7 +271,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self._diagnose(train_data)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
         with _single_threaded_blas():
-            self._prepare_structure(train_data)
+            self._prepare_structure(train_data, val)
             result = train(self, train_data, val)
             self._keep_training(result, val is not None)
             self._after_fit(train_data, val)

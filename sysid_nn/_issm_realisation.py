@@ -22,12 +22,12 @@ def validate_tdl_start(est) -> None:
     """Check ``n_states`` and ``linear_part`` for a TDL start; set ``n_states_``."""
     p, m = est.n_outputs_, est.n_features_in_
     n = p * ARX_LAGS + m * (ARX_LAGS - 1)
-    if est.n_states is not None and est.n_states != n:
+    if est.n_states not in (None, "auto") and est.n_states != n:
         raise ValueError(
             f'init="tdl" realises a TDL network with {ARX_LAGS} output and '
             f"{ARX_LAGS} input lags in state space, which takes n_states = "
             f"{n} here ({ARX_LAGS} x {p} outputs + {ARX_LAGS - 1} x {m} "
-            f"inputs); got n_states={est.n_states}. Use n_states=None."
+            f"inputs); got n_states={est.n_states}. Use n_states='auto' or None."
         )
     if not est.linear_part and est._hidden_layers():
         raise ValueError(
@@ -44,6 +44,8 @@ def start_tdl(est) -> TDLRegressor:
     training); the lags are the TDL defaults the realisation assumes.
     """
     shared = set(est._get_param_names()) & set(TDLRegressor._get_param_names())
+    if isinstance(est.hidden_layer_sizes, str):
+        shared.discard("hidden_layer_sizes")  # "auto": the TDL's own default
     return TDLRegressor(
         output_lags=ARX_LAGS,
         input_lags=ARX_LAGS,

@@ -150,7 +150,7 @@ def linear_blocks(L: np.ndarray, c: np.ndarray, n: int, m: int) -> Bunch:
     return Bunch(A=L[:, :n], B=L[:, n : n + m], K=L[:, n + m :], c=c)
 
 
-def _subspace_records(est, data: _Data):
+def subspace_records(est, data: _Data):
     """The training records as the subspace fit takes them.
 
     ``u(k)`` of the subspace model acts on ``x(k+1)``: it is ``F(t + 1 -
@@ -165,15 +165,16 @@ def _subspace_records(est, data: _Data):
     return Y, U
 
 
-def subspace_horizon(est, data: _Data) -> int:
+def subspace_horizon(est, data: _Data, n: int | None = None) -> int:
     """Past and future horizon of the subspace start; 0 if the records are too short.
 
     The longest up to ``HORIZON`` for which the projection has at least
     twice as many windows as coefficients and the extended observability
-    matrix more rows than ``n_states``.
+    matrix more rows than ``n`` states (default ``n_states_``).
     """
-    p, m, n = est.n_outputs_, est.n_features_in_, est.n_states_
-    lengths = np.array([len(y) for y in _subspace_records(est, data)[0]])
+    p, m = est.n_outputs_, est.n_features_in_
+    n = est.n_states_ if n is None else n
+    lengths = np.array([len(y) for y in subspace_records(est, data)[0]])
     for horizon in range(HORIZON, 0, -1):
         windows = np.maximum(lengths - 2 * horizon + 1, 0).sum()
         if horizon * p > n and windows >= 2 * horizon * (2 * m + p):
@@ -191,7 +192,7 @@ def subspace_start(est, data: _Data) -> Bunch:
     with the unmeasured states zero at the model's rest state.
     """
     p, n = est.n_outputs_, est.n_states_
-    Y, U = _subspace_records(est, data)
+    Y, U = subspace_records(est, data)
     lin = subspace_model(Y, U, n, subspace_horizon(est, data))
     # Measured outputs first: x -> [C x; the rest of the state space].
     rest = np.linalg.svd(lin.C)[2][p:]

@@ -55,6 +55,8 @@ def _linear_copy(est):
     """A shallow copy of ``est`` (scaling fitted) with no hidden layer."""
     lin = copy.copy(est)
     lin.hidden_layer_sizes = ()
+    if getattr(est, "n_states", None) == "auto":
+        lin.n_states = est.n_states_  # the order the network was given
     lin.verbose = 0  # its progress is not a restart's
     return lin
 
@@ -88,7 +90,7 @@ def linear_candidate(est, train, val, restart) -> LinearCandidate | None:
     if not has_linear_candidate(est):
         return None
     lin = _linear_copy(est)
-    lin._prepare_structure(train)
+    lin._prepare_structure(train, val)
     n_stages = len(lin._stages())
     # Through the class: an attribute of the instance (copied) must not
     # stand in for the method.

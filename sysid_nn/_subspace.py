@@ -17,6 +17,8 @@ import numpy as np
 from scipy.linalg import solve_discrete_are
 from sklearn.utils import Bunch
 
+from sysid_nn._kernels._linear import linear_free_run
+
 #: Past and future horizon (samples) of the block-Hankel matrices.
 HORIZON = 50
 
@@ -64,15 +66,34 @@ def subspace_model(Y, U, n: int, horizon: int = HORIZON) -> Bunch:
     >>> np.round(np.sort(np.abs(np.linalg.eigvals(model.A))), 2)
     array([0.84, 0.84])
     """
-    p = Y[0].shape[1]
+    return model_of_order(Y, U, projection(Y, U, horizon), n)
+
+
+def projection(Y, U, horizon: int = HORIZON, constant: bool = False) -> Bunch:
+    """The oblique projection shared by the models of every order.
+
+    Returns a Bunch with ``L_past`` (the future outputs' coefficients on
+    the past windows), ``left`` and ``singular_values`` (its SVD along the
+    past windows) and ``horizon``. The singular values fall off after the
+    system's order: the gap reads the order from the data. With
+    ``constant``, the projection is also along a constant, which otherwise
+    shows as one more state (an offset of the records).
+    """
     past, u_future, y_future = _windows(Y, U, horizon)
-    # Oblique projection of the future outputs along the future inputs
-    # onto the past: the least-squares coefficients of the past.
-    design = np.vstack([past, u_future])
+    # Oblique projection of the future outputs along the future inputs onto
+    # the past: the least-squares coefficients of the past.
+    along = [u_future, np.ones((1, past.shape[1]))] if constant else [u_future]
+    design = np.vstack([past, *along])
     coef = np.linalg.lstsq(design.T, y_future.T, rcond=None)[0].T
     L_past = coef[:, : past.shape[0]]
-    projection = L_past @ past
-    left, sv, _ = np.linalg.svd(projection, full_matrices=False)
+    left, sv, _ = np.linalg.svd(L_past @ past, full_matrices=False)
+    return Bunch(L_past=L_past, left=left, singular_values=sv, horizon=horizon)
+
+
+def model_of_order(Y, U, proj: Bunch, n: int) -> Bunch:
+    """The model of order ``n`` from a :func:`projection` of records ``Y, U``."""
+    p, horizon = Y[0].shape[1], proj.horizon
+    left, sv, L_past = proj.left, proj.singular_values, proj.L_past
     gamma = left[:, :n] * np.sqrt(sv[:n])  # extended observability matrix
     observer = np.linalg.pinv(gamma) @ L_past
     # Kalman states along every record, then A, B, C, K by least squares.
@@ -117,3 +138,59 @@ def kalman_gain(A, C, w, v):
     Q, S, R = cov[:n, :n], cov[:n, n:], cov[n:, n:]
     P = solve_discrete_are(A.T, C.T, Q, R, s=S)
     return (A @ P @ C.T + S) @ np.linalg.inv(C @ P @ C.T + R)
+
+
+def output_error_model(Y, U, proj: Bunch, n: int) -> Bunch:
+    """Linear model of order ``n`` fitted for its free run.
+
+    ``A`` and ``C`` from the shift invariance of the extended observability
+    matrix of :func:`projection` (MOESP), then ``B``, ``c`` and the initial
+    state of every record by least squares on the free-run (output) error,
+    which is linear in them. On the field's lightly damped records this
+    simulated far better than the Kalman-state regression of
+    :func:`subspace_model`, whose ``A`` was often unstable (Silverbox,
+    orders 3-10: validation NRMSE 0.21 against divergence). Returns a Bunch
+    with ``A, B, C, c``; ``A`` may be unstable.
+    """
+    p, m = Y[0].shape[1], U[0].shape[1]
+    gamma = proj.left[:, :n] * np.sqrt(proj.singular_values[:n])
+    C = gamma[:p]
+    A = np.linalg.lstsq(gamma[:-p], gamma[p:], rcond=None)[0]
+    zero_n, zero_b = np.zeros(n), np.zeros((n, m))
+    columns = []  # responses to each entry of B, of c, of every x0
+    for i in range(m):
+        for j in range(n):
+            B = zero_b.copy()
+            B[j, i] = 1.0
+            columns.append([_free_run(A, B, C, zero_n, u, zero_n) for u in U])
+    for j in range(n):
+        c = zero_n.copy()
+        c[j] = 1.0
+        columns.append([_free_run(A, zero_b, C, c, u, zero_n) for u in U])
+    n_rec = len(Y)
+    design = [np.hstack([np.concatenate(col).reshape(-1, 1) for col in columns])]
+    for s in range(n_rec):
+        for j in range(n):
+            x0 = zero_n.copy()
+            x0[j] = 1.0
+            block = [
+                _free_run(A, zero_b, C, zero_n, u, x0)
+                if k == s
+                else np.zeros((len(u), p))
+                for k, u in enumerate(U)
+            ]
+            design.append(np.concatenate(block).reshape(-1, 1))
+    design = np.hstack(design)
+    target = np.concatenate(Y).ravel()
+    ok = np.all(np.isfinite(design), axis=0)
+    theta = np.zeros(design.shape[1])
+    if np.abs(np.linalg.eigvals(A)).max() < 1.0 and ok.all():
+        theta = np.linalg.lstsq(design, target, rcond=None)[0]
+    B = theta[: n * m].reshape(m, n).T
+    return Bunch(A=A, B=B, C=C, c=theta[n * m : n * m + n])
+
+
+def _free_run(A, B, C, c, u, x0):
+    out = np.empty((len(u), C.shape[0]))
+    linear_free_run(A, B, C, c, u, x0, out)
+    return out

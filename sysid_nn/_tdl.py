@@ -350,7 +350,7 @@ such, default=None
     def _after_fit(self, train, val) -> None:
         self._smooth_train = None  # a copy of the records: not kept
 
-    def _prepare_structure(self, data: _Data) -> None:
+    def _prepare_structure(self, data: _Data, val: _Data | None = None) -> None:
         self._smooth_train = None
         if self.shooting_ == "free":
             # The linear start and the lag scaling from the band where the

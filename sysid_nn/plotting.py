@@ -37,6 +37,7 @@ __all__ = [
     "plot_cross_correlation",
     "plot_error_statistics",
     "plot_hysteresis",
+    "plot_order_selection",
     "plot_records",
     "plot_residual_analysis",
     "plot_response",
@@ -641,3 +642,87 @@ def plot_band(
         label=f"{100 * level:g} % interval",
     )
     return ax
+
+
+def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) -> Figure:
+    """The evidence behind ``n_states="auto"`` of a fitted :class:`ISSMRegressor`.
+
+    Top: the leading singular values of the subspace projection (log
+    scale), with the order after their largest gap marked. Bottom: the
+    validation free-run NRMSE of the linear model of every candidate order,
+    the tolerance band above the best, and the chosen linear order and
+    number of states marked.
+
+    Parameters
+    ----------
+    estimator : ISSMRegressor
+        Fitted with ``n_states="auto"`` (it has ``order_selection_``).
+    ax : pair of Axes, optional
+        Axes for the two panels; a new figure if None.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure drawn on.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.signal import lfilter
+    >>> from sysid_nn import ISSMRegressor
+    >>> u = np.random.default_rng(0).standard_normal((600, 1))
+    >>> y = lfilter([0.0, 0.5], [1.0, -1.5, 0.7], u[:, 0])
+    >>> model = ISSMRegressor(hidden_layer_sizes=(), n_init=1,
+    ...                       random_state=0).fit(u, y)
+    >>> fig = plot_order_selection(model)
+    >>> len(fig.axes)
+    2
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close(fig)
+    """
+    selection = getattr(estimator, "order_selection_", None)
+    if selection is None or selection.linear_order is None:
+        raise ValueError(
+            "estimator has no order selection to draw: fit an ISSMRegressor "
+            'with n_states="auto" on records long enough for it (see '
+            "order_selection_) first."
+        )
+    top, bottom = _new_panels(ax, 2, figsize=(6.4, 6.4))
+    sv = np.asarray(selection.singular_values, dtype=float)
+    orders = np.arange(1, len(sv) + 1)
+    top.semilogy(orders, sv / sv[0], "o-", linewidth=1.0)
+    top.axvline(
+        selection.gap_order + 0.5,
+        label=f"gap after {selection.gap_order}",
+        **_BAND_STYLE,
+    )
+    _finish(top, "index", "singular value / largest", "Subspace singular values")
+    scores = np.asarray(selection.scores, dtype=float)
+    finite = np.isfinite(scores)
+    bottom.plot(
+        selection.orders[finite],
+        scores[finite],
+        "o-",
+        linewidth=1.0,
+        label="linear model",
+    )
+    if finite.any():
+        bottom.axhline(
+            (1.0 + selection.tolerance) * scores[finite].min() + selection.floor,
+            label=f"best + {100 * selection.tolerance:g} %",
+            **_BAND_STYLE,
+        )
+    bottom.axvline(
+        selection.linear_order,
+        color="C1",
+        label=f"linear order {selection.linear_order}",
+    )
+    bottom.axvline(
+        selection.n_states,
+        color="C2",
+        linestyle="--",
+        label=f"n_states {selection.n_states}",
+    )
+    _finish(bottom, "order", "validation NRMSE", "Free run of the linear models")
+    top.figure.tight_layout()
+    return top.figure

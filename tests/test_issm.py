@@ -41,16 +41,29 @@ def _twin_mlp(w, sizes, activation, bypass, z):
     return a
 
 
-def _twin_run(est, w, data, seg_len):
-    """Outputs of the modelled rows, stacked, by a plain Python loop."""
+def _twin_run(est, w, data, seg_len, filt=False):
+    """Outputs of the modelled rows, stacked, by a plain Python loop.
+
+    With ``filt``, segments start from the one-step predictor run beside the
+    simulation, which also gives the first segment.
+    """
     n, p, nk = est.n_states_, est.n_outputs_, est.input_delay
     sizes, bypass = list(est._sizes_), est._bypass()
+    filt = filt and 1 < seg_len < _FREE_RUN
     out = []
     for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
         x = np.zeros(n)
         x[:p] = data.Y[a + data.h - 1]
+        xf = x.copy()
         for t in range(a + data.h, b):
             k = t - a - data.h
+            if filt:
+                zf = np.concatenate([xf, data.U[t - nk], data.Y[t - 1] - xf[:p]])
+                xf = _twin_mlp(w, sizes, est.activation, bypass, zf)
+                if k < seg_len or k % seg_len == 0:
+                    x = xf
+                    out.append(x[:p])
+                    continue
             e = np.zeros(p)
             if seg_len == 1:
                 e = data.Y[t - 1] - x[:p]
@@ -94,18 +107,21 @@ CASES = [
 ]
 
 
+@pytest.mark.parametrize("filt", [False, True])
 @pytest.mark.parametrize("seg_len", MODES)
 @pytest.mark.parametrize(("p", "hidden", "activation", "linear_part"), CASES)
 def test_kernel_matches_twin_and_finite_differences(
-    seg_len, p, hidden, activation, linear_part
+    seg_len, p, hidden, activation, linear_part, filt
 ):
+    """Filtered segment starts (``filt``) included: gradients through the filter."""
     est, data, w = _small_fitted(p, hidden, 3, activation, linear_part)
+    est.shooting_ = "filter" if filt else "measured"
     rows = data.modelled
     Yhat, J, diverged, state = est._run(w, data, seg_len, True)
     assert (diverged < 0).all()
     # Forward pass: the numba kernel against the NumPy twin.
     np.testing.assert_allclose(
-        Yhat[rows], _twin_run(est, w, data, seg_len), rtol=1e-12, atol=1e-12
+        Yhat[rows], _twin_run(est, w, data, seg_len, filt), rtol=1e-12, atol=1e-12
     )
     # Jacobian (eq. 10 sensitivities) against central differences of the twin.
     eps = 1e-6
@@ -113,8 +129,8 @@ def test_kernel_matches_twin_and_finite_differences(
     for c in range(len(w)):
         dw = np.zeros(len(w))
         dw[c] = eps
-        up = _twin_run(est, w + dw, data, seg_len)
-        down = _twin_run(est, w - dw, data, seg_len)
+        up = _twin_run(est, w + dw, data, seg_len, filt)
+        down = _twin_run(est, w - dw, data, seg_len, filt)
         fd[:, c] = ((up - down) / (2 * eps)).ravel()
     rel = np.linalg.norm(J - fd) / np.linalg.norm(fd)
     assert rel < 1e-6, rel

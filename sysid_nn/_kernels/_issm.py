@@ -18,6 +18,12 @@ the state is ``X0[s]``. Three modes, chosen by ``seg_len``:
   each later segment start the measured states are reset to the measured
   outputs while the unmeasured ones carry over (multiple shooting);
 * ``seg_len`` beyond the sequence: the free run from ``X0``.
+
+With ``filt`` and ``seg_len > 1``, the one-step predictor (the model's own
+innovation filter) runs beside the simulation, and every segment starts from
+its state, the unmeasured states included, with exact sensitivities through
+it; the filter's burn-in, the first segment of each sequence, gives that
+segment's rows as one-step predictions.
 """
 
 from __future__ import annotations
@@ -42,9 +48,50 @@ def _network_input(x, U, t, nk, e, z):
 
 
 @njit(cache=True, inline="always")
+def _advance(w, sizes, act, bypass, x, U, t, nk, e, z, acts, out, bound):
+    """One step of the network from state ``x``; True if it left the range."""
+    _network_input(x, U, t, nk, e, z)
+    mlp_forward(w, sizes, act, bypass, z, acts, out)
+    return out_of_range(out, bound)
+
+
+@njit(cache=True, inline="always")
+def _sensitivity_step(
+    w, sizes, act, bypass, z, acts, predictor, want_jac, want_lin, t, D,
+    psi_prev, psi, v, lam, gz, coef, d1, d2, n, m, p,
+):  # fmt: skip
+    """``Psi(t)`` from ``Psi(t-1)`` (eq. 10) and ``D[t] = d x(t) / d z``."""
+    n_z = z.shape[0]
+    n_w = w.shape[0]
+    for j in range(n):
+        v[:] = 0.0
+        v[j] = 1.0
+        lam[:] = 0.0
+        mlp_vjp(w, sizes, act, bypass, z, acts, v, lam, gz, d1, d2)
+        if want_lin:
+            for c in range(n_z):
+                D[t, j, c] = gz[c]
+        if not want_jac:
+            continue
+        # Eq. 10: Psi(t) = Lambda(t) + [Phi(t) - K(t) H] Psi(t-1).
+        for i in range(n):
+            coef[i] = gz[i]
+        if predictor:
+            for k in range(p):
+                coef[k] -= gz[n + m + k]
+        for i in range(n):
+            c_i = coef[i]
+            if c_i != 0.0:
+                for c in range(n_w):
+                    lam[c] += c_i * psi_prev[i, c]
+        for c in range(n_w):
+            psi[j, c] = lam[c]
+
+
+@njit(cache=True, inline="always")
 def _loop(
     w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound, jac,
-    want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged,
+    want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged, filt,
 ):  # fmt: skip
     # Inlined twice by issm_run, once with the constants NO_JAC and False, so
     # that the plain run compiles without the sensitivity branches.
@@ -55,6 +102,7 @@ def _loop(
     n_w = w.shape[0]
     width = np.max(sizes)
     predictor = seg_len == 1
+    filt = filt and not predictor
     want_jac = jac != rec.NO_JAC
     sens = want_jac or want_lin
     x = np.empty(n)
@@ -70,6 +118,11 @@ def _loop(
     lam = np.empty(n_w)  # d x_j / d w at this step before the recursion
     psi = np.zeros((n, n_w if want_jac else 0))
     psi_prev = np.zeros((n, n_w if want_jac else 0))
+    # The innovation filter run beside a filtered-start simulation.
+    n_f = n_w if (want_jac and filt) else 0
+    xf = np.empty(n)
+    psif = np.zeros((n, n_f))
+    psif_prev = np.zeros((n, n_f))
     Jb, rb = rec.new_block(n_w, jac)
     n_b = 0
     row_base = 0
@@ -80,56 +133,63 @@ def _loop(
         rec.fill_rows(Xs, a, a + h, X0[s])
         for i in range(n):
             x[i] = X0[s, i]
+            xf[i] = X0[s, i]
         if want_jac:
             psi_prev[:, :] = 0.0
+            psif_prev[:, :] = 0.0
         for t in range(a + h, b):
             k_local = t - a - h
-            restart = (not predictor) and k_local > 0 and k_local % seg_len == 0
-            if restart:
-                # Multiple shooting: measured states restart from the data;
-                # their sensitivities vanish, the unmeasured ones carry over.
+            at_start = (not predictor) and k_local > 0 and k_local % seg_len == 0
+            # Filtered segments: the burn-in and every segment start are the
+            # innovation filter's rows.
+            from_filter = filt and (k_local < seg_len or at_start)
+            if filt:
                 for k in range(p):
-                    x[k] = Y[t - 1, k]
-                if want_jac:
-                    psi_prev[:p, :] = 0.0
-            if predictor:
-                for k in range(p):
-                    e[k] = Y[t - 1, k] - x[k]
-            _network_input(x, U, t, nk, e, z)
-            mlp_forward(w, sizes, act, bypass, z, acts, out)
+                    e[k] = Y[t - 1, k] - xf[k]
+                if _advance(
+                    w, sizes, act, bypass, xf, U, t, nk, e, z, acts, out, bound
+                ):
+                    diverged[s] = k_local
+                    rec.fill_rows(Xs, t, b, np.full(n, np.nan))
+                    break
+                for i in range(n):
+                    xf[i] = out[i]
+                if want_jac or (want_lin and from_filter):
+                    _sensitivity_step(
+                        w, sizes, act, bypass, z, acts, True, want_jac,
+                        want_lin and from_filter, t, D, psif_prev, psif, v, lam,
+                        gz, coef, d1, d2, n, m, p,
+                    )  # fmt: skip
+                if want_jac and from_filter:
+                    psi[:, :] = psif
+            if not from_filter:
+                if at_start:
+                    # Multiple shooting: measured states restart from the
+                    # data; their sensitivities vanish, the unmeasured ones
+                    # carry over.
+                    for k in range(p):
+                        x[k] = Y[t - 1, k]
+                    if want_jac:
+                        psi_prev[:p, :] = 0.0
+                if predictor:
+                    for k in range(p):
+                        e[k] = Y[t - 1, k] - x[k]
+                else:
+                    e[:] = 0.0
+                if _advance(w, sizes, act, bypass, x, U, t, nk, e, z, acts, out, bound):
+                    diverged[s] = k_local
+                    rec.fill_rows(Xs, t, b, np.full(n, np.nan))
+                    break
+                if sens:
+                    _sensitivity_step(
+                        w, sizes, act, bypass, z, acts, predictor, want_jac,
+                        want_lin, t, D, psi_prev, psi, v, lam, gz, coef, d1, d2,
+                        n, m, p,
+                    )  # fmt: skip
             rec.keep_step(Z, A, t, z, acts)
-            if out_of_range(out, bound):
-                diverged[s] = k_local
-                rec.fill_rows(Xs, t, b, np.full(n, np.nan))
-                break
             for i in range(n):
                 x[i] = out[i]
                 Xs[t, i] = out[i]
-            if not sens:
-                continue
-            for j in range(n):
-                v[:] = 0.0
-                v[j] = 1.0
-                lam[:] = 0.0
-                mlp_vjp(w, sizes, act, bypass, z, acts, v, lam, gz, d1, d2)
-                if want_lin:
-                    for c in range(n_z):
-                        D[t, j, c] = gz[c]
-                if not want_jac:
-                    continue
-                # Eq. 10: Psi(t) = Lambda(t) + [Phi(t) - K(t) H] Psi(t-1).
-                for i in range(n):
-                    coef[i] = gz[i]
-                if predictor:
-                    for k in range(p):
-                        coef[k] -= gz[n + m + k]
-                for i in range(n):
-                    c_i = coef[i]
-                    if c_i != 0.0:
-                        for c in range(n_w):
-                            lam[c] += c_i * psi_prev[i, c]
-                for c in range(n_w):
-                    psi[j, c] = lam[c]
             if jac == rec.FULL_JAC:
                 rec.copy_rows(J[row_base + k_local * p :], psi, 0, p)
             elif jac == rec.NORMAL:
@@ -139,6 +199,8 @@ def _loop(
                     )
             if want_jac:
                 psi, psi_prev = psi_prev, psi
+                if filt:
+                    psif, psif_prev = psif_prev, psif
         row_base += (b - a - h) * p
     rec.finish(Jb, rb, n_b, JtJ, Jtr, syrk)
 
@@ -146,7 +208,7 @@ def _loop(
 @njit(cache=True)
 def issm_run(
     w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound, jac,
-    want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged,
+    want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged, filt=False,
 ):  # fmt: skip
     """Run the state recurrence; optionally the Jacobian and linearisation.
 
@@ -161,14 +223,18 @@ def issm_run(
     eq. 12. ``Z`` and ``A`` keep the network
     inputs and hidden activations for the adjoint pass when they have rows.
     ``diverged[s]`` is the first modelled index of sequence ``s`` whose state
-    left ``[-bound, bound]``, or -1.
+    left ``[-bound, bound]``, or -1. With ``filt``, simulated segments start
+    from the innovation filter run beside them (see the module docstring);
+    ``Z`` and ``A`` then hold no usable adjoint state.
     """
     if jac == rec.NO_JAC and not want_lin:
         _loop(w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound,
-              rec.NO_JAC, False, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged)  # fmt: skip
+              rec.NO_JAC, False, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged,
+              filt)  # fmt: skip
     else:
         _loop(w, sizes, act, bypass, Y, U, starts, h, nk, X0, seg_len, bound,
-              jac, want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged)  # fmt: skip
+              jac, want_lin, Xs, J, Z, A, D, JtJ, Jtr, syrk, diverged,
+              filt)  # fmt: skip
 
 
 @njit(cache=True)

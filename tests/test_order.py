@@ -1,0 +1,164 @@
+"""Tests of the ISSM's order chosen from the data (``n_states="auto"``)."""
+
+from __future__ import annotations
+
+import warnings
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+from sklearn.exceptions import ConvergenceWarning
+from sklearn.model_selection import GridSearchCV, KFold
+
+from sysid_nn import ISSMRegressor
+from sysid_nn._order import (
+    ORDER_FLOOR,
+    ORDER_TOLERANCE,
+    SAMPLES_PER_WEIGHT,
+    _n_weights,
+)
+from sysid_nn.plotting import plot_order_selection
+
+# Short training budgets: the order, not the fit, is under test.
+pytestmark = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+
+#: Two resonances in cascade: a system of order 4.
+A1, A2 = [1.0, -1.6, 0.9], [1.0, -1.2, 0.75]
+
+
+def _fourth_order(n, seed, cubic=0.0):
+    """Records of the fourth-order system, with a mild cubic between its blocks."""
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(n)
+    v = lfilter([0.0, 0.3], A1, u)
+    v = v + cubic * v**3
+    return u[:, None], lfilter([0.0, 0.4], A2, v)
+
+
+def _linear_issm(**params):
+    settings = {"n_init": 1, "max_iter": 20, "random_state": 0, **params}
+    return ISSMRegressor(hidden_layer_sizes=(), **settings)
+
+
+@pytest.mark.parametrize("cubic", [0.0, 0.05])
+def test_auto_order_finds_the_systems_order(cubic):
+    X, y = _fourth_order(5000, 0, cubic)
+    Xv, yv = _fourth_order(1000, 1, cubic)
+    model = _linear_issm().fit(X, y, X_val=Xv, y_val=yv)
+    sel = model.order_selection_
+    assert sel.linear_order == 4
+    assert sel.gap_order == 4
+    # Lower orders miss the dynamics; the chosen one is within the tolerance.
+    scores = dict(zip(sel.orders, sel.scores, strict=True))
+    assert scores[3] > 2 * scores[4]
+    assert scores[4] <= (1 + ORDER_TOLERANCE) * np.min(sel.scores) + ORDER_FLOOR
+    # The network doubles the linear order (see sysid_nn._order).
+    assert model.n_states_ == sel.n_states == 8
+    assert np.all(np.diff(sel.singular_values) <= 0)
+
+
+def test_auto_order_without_separate_validation_data():
+    X, y = _fourth_order(4000, 2)
+    model = _linear_issm().fit(X, y)
+    assert model.order_selection_.linear_order == 4
+
+
+def test_grid_search_over_orders_agrees_with_auto():
+    Xs, ys = zip(*(_fourth_order(800, seed) for seed in range(4)), strict=True)
+    Xs, ys = list(Xs), list(ys)
+    search = GridSearchCV(
+        _linear_issm(early_stopping=False),
+        {"n_states": [2, 3, 4, 5, "auto"]},
+        cv=KFold(4),
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        search.fit(Xs, ys)
+    score = dict(
+        zip(
+            search.cv_results_["param_n_states"],
+            search.cv_results_["mean_test_score"],
+            strict=True,
+        )
+    )
+    # Orders below the system's are clearly worse; from 4 on they agree.
+    assert score[3] < score[4] - 0.01
+    assert score[4] > search.best_score_ - 1e-3
+    assert score["auto"] > search.best_score_ - 1e-3
+    auto = _linear_issm(early_stopping=False).fit(Xs, ys)
+    assert auto.order_selection_.linear_order == 4
+
+
+def test_unexplained_records_take_the_singular_value_gap():
+    # An even non-linearity after a filter: no linear model explains it.
+    rng = np.random.default_rng(6)
+    u = rng.standard_normal((3000, 1))
+    y = lfilter([0.0, 0.3], [1.0, -1.2, 0.5], u[:, 0]) ** 2
+    model = _linear_issm(max_iter=200).fit(u, y)
+    sel = model.order_selection_
+    assert not np.min(sel.scores) <= sel.reliable
+    assert sel.n_states == max(sel.gap_order, 3)
+
+
+def test_short_records_lower_the_order():
+    X, y = _fourth_order(5000, 0)
+    long = _linear_issm().fit(X, y, X_val=X[:1000], y_val=y[:1000])
+    short = _linear_issm().fit(X[:2000], y[:2000], X_val=X[:1000], y_val=y[:1000])
+    assert (
+        long.order_selection_.linear_order == short.order_selection_.linear_order == 4
+    )
+    assert long.n_states_ == 8
+    # At most one weight per ten samples for the auto-sized network.
+    n = short.n_states_
+    assert 3 <= n < 8
+    assert SAMPLES_PER_WEIGHT * _n_weights(short, n) <= 2000
+    assert SAMPLES_PER_WEIGHT * _n_weights(short, n + 1) > 2000
+
+
+def test_records_too_short_for_the_projection_keep_p_plus_2():
+    X, y = _fourth_order(12, 7)
+    model = _linear_issm(early_stopping=False).fit(X, y)
+    assert model.n_states_ == 3
+    assert model.order_selection_.linear_order is None
+    assert len(model.order_selection_.scores) == 0
+
+
+def test_given_order_leaves_no_selection_behind():
+    X, y = _fourth_order(1500, 3)
+    model = _linear_issm().fit(X, y)
+    assert hasattr(model, "order_selection_")
+    model.set_params(n_states=2).fit(X, y)
+    assert not hasattr(model, "order_selection_")
+    assert model.n_states_ == 2
+
+
+def test_auto_width_and_segment_starts_follow_the_order():
+    X, y = _fourth_order(6000, 0)
+    model = ISSMRegressor(n_init=1, max_iter=2, random_state=0).fit(X, y)
+    n = model.n_states_
+    assert n == model.order_selection_.n_states > 5
+    # Three hidden units per unmeasured state; segments from the filter.
+    assert model._sizes_[1:-1].tolist() == [3 * (n - 1)]
+    assert model.shooting_ == "filter"
+    few = ISSMRegressor(n_states=3, n_init=1, max_iter=2, random_state=0).fit(X, y)
+    assert few._sizes_[1:-1].tolist() == [7]
+    assert few.shooting_ == "measured"
+
+
+def test_plot_order_selection_marks_the_choice():
+    X, y = _fourth_order(1500, 5)
+    model = _linear_issm(max_iter=200).fit(X, y)
+    fig = plot_order_selection(model)
+    top, bottom = fig.axes
+    assert top.get_yscale() == "log"
+    labels = [line.get_label() for line in bottom.get_lines()]
+    n = model.order_selection_.n_states
+    assert "linear order 4" in labels and f"n_states {n}" in labels
+    plt.close(fig)
+    with pytest.raises(ValueError, match="no order selection"):
+        plot_order_selection(model.set_params(n_states=4, max_iter=200).fit(X, y))
