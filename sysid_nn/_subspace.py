@@ -44,7 +44,9 @@ def _windows(Y, U, horizon):
     return np.hstack(past), np.hstack(u_future), np.hstack(y_future)
 
 
-def subspace_model(Y, U, n: int, horizon: int = HORIZON) -> Bunch:
+def subspace_model(
+    Y, U, n: int, horizon: int = HORIZON, constant: bool = False
+) -> Bunch:
     """Linear innovation model of order ``n`` from records ``Y[s], U[s]``.
 
     ``Y[s]`` has shape ``(N_s, p)`` and ``U[s]`` ``(N_s, m)``; ``u(k)``
@@ -53,6 +55,7 @@ def subspace_model(Y, U, n: int, horizon: int = HORIZON) -> Bunch:
     sample ``horizon`` on, stacked) and ``observer``, the map from a past
     window (``horizon`` inputs, then ``horizon`` outputs, oldest first, as
     stacked in the block-Hankel matrices) to the state estimate at its end.
+    ``constant`` projects along a constant too (see :func:`projection`).
 
     Examples
     --------
@@ -66,7 +69,7 @@ def subspace_model(Y, U, n: int, horizon: int = HORIZON) -> Bunch:
     >>> np.round(np.sort(np.abs(np.linalg.eigvals(model.A))), 2)
     array([0.84, 0.84])
     """
-    return model_of_order(Y, U, projection(Y, U, horizon), n)
+    return model_of_order(Y, U, projection(Y, U, horizon, constant), n)
 
 
 def projection(Y, U, horizon: int = HORIZON, constant: bool = False) -> Bunch:
