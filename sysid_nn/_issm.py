@@ -141,10 +141,14 @@ class ISSMRegressor(_RecurrentRegressorBase):
         Number of states ``n``, at least the number of outputs ``p``.
         ``"auto"`` reads the order from the data: the smallest order whose
         linear (subspace) model's validation free run is within 5 % of the
-        best of the orders ``p`` to 10 is the linear order, and the network
-        gets twice as many states, at least ``p + 2`` (where no linear model
-        explains the records, the order after the largest gap of the
-        subspace singular values, at least ``p + 2``); the evidence is kept in
+        best of the orders ``p`` to 10 (or, when larger and also within 5 %,
+        the order at the largest gap of the subspace singular values) is the
+        linear order ``L``, and the network gets ``L + max(p, ceil(L / p))``
+        states, at least ``p + 2`` (``2 L`` for one output, ``3 n`` for an
+        ``n``-storey building with every floor's acceleration measured; where
+        no linear model explains the records, the order after the largest
+        gap of the subspace singular values, at least ``p + 2``); the
+        evidence is kept in
         ``order_selection_`` and drawn by
         :func:`~sysid_nn.plotting.plot_order_selection`. ``None`` uses ``p +
         2``: two states beyond the measured ones (4 for displacement and
@@ -222,8 +226,10 @@ class ISSMRegressor(_RecurrentRegressorBase):
         of their linear models, standardised units, ``inf`` for an unstable
         one), ``singular_values`` (leading singular values of the subspace
         projection), ``gap_order`` (the order after their largest ratio),
-        ``linear_order`` and ``n_states`` (the rule of ``n_states``),
-        ``tolerance``, ``floor`` and ``reliable`` (the rule's constants).
+        ``validated_order`` (the smallest within the tolerance of the best
+        score), ``linear_order``, ``n_outputs`` and ``n_states`` (the rule
+        of ``n_states``), ``tolerance``, ``floor`` and ``reliable`` (the
+        rule's constants).
         Records too short for the projection get ``p + 2`` states, with
         empty evidence and ``linear_order=None``.
     shooting_ : {"filter", "measured"}

@@ -7,14 +7,22 @@ at the cost of a few least-squares fits. Each candidate's free run from rest
 on the validation records (the training records when there are none) scores
 it. The rule, whose inputs are all kept in ``order_selection_``:
 
-* the *linear order* is the smallest candidate whose validation free-run
-  error is within :data:`ORDER_TOLERANCE` (plus :data:`ORDER_FLOOR`) of the
-  best candidate's;
-* the network gets :data:`STATE_FACTOR` times as many states, and at least
-  ``p + 2``: on a non-linear system the linear models' free run is limited
-  by what they miss, which hides the slower part of the dynamics (on the
-  Wiener-Hammerstein benchmark, two third-order blocks, the linear order
-  came out 3; 4 states gave a test error of 8.0 mV, 6 states 0.49 mV);
+* the *validated order* is the smallest candidate whose validation
+  free-run error is within :data:`ORDER_TOLERANCE` (plus :data:`ORDER_FLOOR`)
+  of the best candidate's; the *linear order* ``L`` is the singular
+  values' largest gap (``gap_order``) instead when that is larger and also
+  within the tolerance: among nearly equal free runs the validation can
+  prefer too few states (a five-storey building's floor accelerations
+  validated 8 where the gap shows its 10);
+* the network gets ``L + max(p, ceil(L / p))`` states, at least ``p + 2``:
+  beyond the linear order, one state per output or, when more, the linear
+  order per output (an ARX's lags) once again. A shear building whose
+  every floor is measured gets its ``3 n`` (``2 n`` linear, one hysteretic
+  state per storey); a single output gets ``2 L``: on a non-linear system the
+  linear models' free run is limited by what they miss, which hides the
+  slower part of the dynamics (on the Wiener-Hammerstein benchmark, two
+  sixth-order blocks, the linear order came out 3; 4 states gave a test
+  error of 8.0 mV, 6 states 0.49 mV);
 * records too short for the projection get ``p + 2`` states (empty
   evidence);
 * on short records the order is lowered until the auto-sized network has
@@ -45,8 +53,6 @@ MAX_ORDER = 10
 ORDER_TOLERANCE = 0.05
 #: NRMSE below which candidates count as equal (noise-free records).
 ORDER_FLOOR = 1e-3
-#: States of the network per state of the linear order.
-STATE_FACTOR = 2
 #: Training samples (times outputs) per weight of the network below which
 #: the order is lowered (down to ``p + 2``).
 SAMPLES_PER_WEIGHT = 10
@@ -66,10 +72,11 @@ def select_order(est, train, val) -> Bunch:
     candidates), ``scores`` (validation free-run NRMSE of their linear
     models, ``inf`` for one that diverged), ``singular_values`` (of the
     subspace projection, leading ones), ``gap_order`` (the order after which
-    the ratio of successive singular values is largest), ``linear_order``
-    (the gap order when no candidate is stable) and ``n_states`` (the rule
-    above), and the rule's constants ``tolerance``, ``floor`` and
-    ``reliable``.
+    the ratio of successive singular values is largest), ``validated_order``
+    (the gap order when no candidate is stable), ``linear_order`` (the gap
+    order instead when larger and within the tolerance), ``n_outputs`` and
+    ``n_states`` (the rule above), and the rule's constants ``tolerance``,
+    ``floor`` and ``reliable``.
     """
     p = est.n_outputs_
     top = MAX_ORDER
@@ -82,7 +89,8 @@ def select_order(est, train, val) -> Bunch:
         empty = np.array([], dtype=float)
         return Bunch(
             orders=np.array([], dtype=int), scores=empty, singular_values=empty,
-            gap_order=None, linear_order=None, n_states=p + 2,
+            gap_order=None, validated_order=None, linear_order=None,
+            n_outputs=p, n_states=p + 2,
             tolerance=ORDER_TOLERANCE, floor=ORDER_FLOOR, reliable=RELIABLE_NRMSE,
         )  # fmt: skip
     Y, U = subspace_records(est, train)
@@ -96,9 +104,12 @@ def select_order(est, train, val) -> Bunch:
     gap_order = int(orders[np.argmax(ratios)])
     best = np.min(scores)
     limit = (1.0 + ORDER_TOLERANCE) * best + ORDER_FLOOR
-    linear_order = int(orders[scores <= limit][0]) if np.isfinite(best) else gap_order
+    validated = int(orders[scores <= limit][0]) if np.isfinite(best) else gap_order
+    # The gap overrides the validation only among equally good candidates.
+    gap_fits = scores[orders == gap_order][0] <= limit
+    linear_order = max(validated, gap_order) if gap_fits else validated
     if best <= RELIABLE_NRMSE:
-        n_states = max(STATE_FACTOR * linear_order, p + 2)
+        n_states = max(extra_states(linear_order, p) + linear_order, p + 2)
     else:
         n_states = max(gap_order, p + 2)
     # Short records: no more weights than a tenth of the training samples.
@@ -112,12 +123,25 @@ def select_order(est, train, val) -> Bunch:
         scores=scores,
         singular_values=sv[: 2 * MAX_ORDER].copy(),
         gap_order=gap_order,
+        validated_order=validated,
         linear_order=linear_order,
+        n_outputs=p,
         n_states=int(n_states),
         tolerance=ORDER_TOLERANCE,
         floor=ORDER_FLOOR,
         reliable=RELIABLE_NRMSE,
     )
+
+
+def extra_states(linear_order: int, n_outputs: int) -> int:
+    """States of the network beyond the linear order: ``max(p, ceil(L / p))``.
+
+    Examples
+    --------
+    >>> extra_states(6, 3), extra_states(10, 5), extra_states(3, 1)
+    (3, 5, 3)
+    """
+    return max(n_outputs, -(-linear_order // n_outputs))
 
 
 def auto_width(n_states: int, n_outputs: int) -> int:

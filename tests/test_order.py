@@ -15,7 +15,7 @@ from scipy.signal import lfilter
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, KFold
 
-from sysid_nn import ISSMRegressor
+from sysid_nn import ISSMRegressor, ShearBuilding
 from sysid_nn._order import (
     ORDER_FLOOR,
     ORDER_TOLERANCE,
@@ -162,3 +162,18 @@ def test_plot_order_selection_marks_the_choice():
     plt.close(fig)
     with pytest.raises(ValueError, match="no order selection"):
         plot_order_selection(model.set_params(n_states=4, max_iter=200).fit(X, y))
+
+
+@pytest.mark.parametrize("n_storeys", [3, 5])
+def test_auto_order_of_a_shear_building_is_its_true_order(n_storeys):
+    # Every floor's acceleration measured: 2 n linear states, and one
+    # hysteretic state per storey that the network adds.
+    building = ShearBuilding(n_storeys=n_storeys)
+    rec = building.generate(4, random_state=0, outputs="acceleration")
+    X = [g[:, None] for g in rec.ground_acceleration]
+    y = list(rec.acceleration)
+    model = _linear_issm(max_iter=1).fit(X[:3], y[:3], X_val=X[3:], y_val=y[3:])
+    sel = model.order_selection_
+    assert sel.n_outputs == n_storeys
+    assert sel.gap_order == sel.linear_order == building.modal_properties().linear_order
+    assert model.n_states_ == sel.n_states == 3 * n_storeys
