@@ -155,9 +155,13 @@ def burn_in(est, w: np.ndarray, data) -> int:
     return burn
 
 
-def validation_loss(est, w: np.ndarray, val) -> float:
-    """Mean squared free-run error of ``w`` on the scored rows of ``val``."""
-    Yhat, _, diverged, _ = est._run(w, val, _FREE_RUN, False, keep_state=False)
+def validation_loss(est, w: np.ndarray, val, seg: int = _FREE_RUN) -> float:
+    """Mean squared error of ``w`` on the scored rows of ``val``.
+
+    The model runs over segments of ``seg`` samples (by default the free
+    run); a run that diverged scores ``inf``.
+    """
+    Yhat, _, diverged, _ = est._run(w, val, seg, False, keep_state=False)
     if (diverged >= 0).any():
         return np.inf
     e = Yhat[val.scored] - val.Y[val.scored]

@@ -165,14 +165,7 @@ class _Tracker:
         if self.val is None:
             self.progress(np.inf)
             return
-        Yhat, _, diverged, _ = self.est._run(
-            w, self.val, self.seg, False, keep_state=False
-        )
-        rows = self.val.scored
-        loss = np.inf
-        if not (diverged >= 0).any():
-            e = Yhat[rows] - self.val.Y[rows]
-            loss = float(np.mean(e * e))
+        loss = _selection.validation_loss(self.est, w, self.val, self.seg)
         if self.stage is not None:
             self.stage.validation.append(loss)
         else:
