@@ -489,6 +489,10 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         """The weight penalty of ``alpha="auto"``."""
         return 0.0
 
+    def _linear_start_restarts(self) -> list[int]:
+        """One restart index per distinct linear start (see ``_fit_one``)."""
+        return [0]
+
     def _fit_one(self, train: _Data, val: _Data | None, restart, stop: int):
         """One restart through the stages before ``stop`` (see
         :func:`sysid_nn._training.fit_stages`); a structure may override it

@@ -571,9 +571,11 @@ default=None
             super()._fit(X, y, X_val=X_val, y_val=y_val)
         finally:
             del self._fit_records
-        # The linear model (best_restart_ None) was trained from the first
-        # restart's start.
-        chosen = self._start_of(self.best_restart_ or 0)
+        # The linear model (best_restart_ None) was trained from the start of
+        # restart _linear_restart.
+        linear_restart = self.__dict__.pop("_linear_restart")
+        restart = linear_restart if self.best_restart_ is None else self.best_restart_
+        chosen = self._start_of(restart)
         self.init_, self.linear_model_ = self.__dict__.pop("_linear_starts")[chosen]
         if self.init == "tdl":
             # The training was the TDL's: report its restarts, histories and
@@ -659,6 +661,14 @@ default=None
     def _start_of(self, k: int) -> int:
         """Index in ``_linear_starts`` of restart ``k``: the extra one is last."""
         return int(k >= self.n_init) * (len(self._linear_starts) - 1)
+
+    def _linear_start_restarts(self) -> list[int]:
+        # The extra start is the last restart's.
+        return [0] if len(self._linear_starts) == 1 else [0, self.n_init]
+
+    def _keep_training(self, result, with_validation: bool) -> None:
+        super()._keep_training(result, with_validation)
+        self._linear_restart = result.linear_start
 
     def _fit_one(self, train, val, restart, stop):
         if len(self._linear_starts) == 1:

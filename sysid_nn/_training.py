@@ -199,6 +199,8 @@ class Training:
     selected: str = "restart"
     #: The linear model's run (None where it is no candidate).
     linear: _Run | None = None
+    #: The restart whose linear start the linear model was trained from.
+    linear_start: int = 0
     #: The chosen run (a restart's, or the linear model's).
     chosen_run: _Run | None = None
 
@@ -224,7 +226,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     # The linear model every network must beat; it also sets the burn-in
     # of validation records simulated from rest (see sysid_nn._selection).
     linear = _selection.linear_candidate(
-        est, train_data, val, _Restart(0, int(seeds[0]))
+        est, train_data, val, lambda k: _Restart(k, int(seeds[0]))
     )
     restarts = [_Restart(k, seed) for k, seed in enumerate(seeds)]
     cut = HALVING_AFTER if halving else n_stages
@@ -253,6 +255,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         time.perf_counter() - start,
         selected,
         None if linear is None else linear.run,
+        0 if linear is None else linear.k,
         chosen,
     )
 
