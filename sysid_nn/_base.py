@@ -273,7 +273,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         with _single_threaded_blas():
             self._prepare_structure(train_data, val)
             result = train(self, train_data, val)
-            self._keep_training(result, val is not None)
+            self._keep_training(result, val)
             self._after_fit(train_data, val)
             _uncertainty.fit_covariance(self, train_data)
         self._sysid_nn_version = version_stamp()
@@ -299,9 +299,12 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             )
         return self
 
-    def _keep_training(self, result, with_validation: bool) -> None:
+    def _keep_training(self, result, val: _Data | None) -> None:
         """The fitted attributes of a :class:`~sysid_nn._training.Training`."""
         chosen = result.run
+        with_validation = val is not None
+        self.validation_burn_in_ = None if val is None else val.burn
+        self.validation_start_window_ = None if val is None else val.start_window
         self.coefs_ = result.w
         self.fallback_ = result.fallback
         self.n_iter_ = chosen.n_iter
@@ -488,6 +491,16 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
     def _auto_alpha(self) -> float:
         """The weight penalty of ``alpha="auto"``."""
         return 0.0
+
+    def _estimates_start(self) -> bool:
+        """Whether a run's initial state holds more than measured outputs."""
+        return False
+
+    def _fitted_start(self, w: np.ndarray, data: _Data, window: int) -> _Data:
+        """``data`` with initial states fitted to each sequence's first
+        ``window`` modelled rows (see ``_estimates_start``): here the
+        measured history rows already are the whole initial condition."""
+        return data
 
     def _linear_start_restarts(self) -> list[int]:
         """One restart index per distinct linear start (see ``_fit_one``)."""

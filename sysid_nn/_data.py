@@ -45,6 +45,12 @@ class _Data:
     skip: int = 0
     #: Leading modelled rows of every sequence left out of it too (a burn-in).
     burn: int = 0
+    #: Modelled rows at the start of every sequence its initial state is
+    #: fitted to before a validation run (0: none; see ``_fitted_start``).
+    start_window: int = 0
+    #: Initial states of the sequences (the ISSM's), or None: from the
+    #: history rows.
+    X0: np.ndarray | None = None
 
     @property
     def modelled(self) -> np.ndarray:

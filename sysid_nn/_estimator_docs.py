@@ -114,9 +114,21 @@ selected_ : {"restart", "linear"}
     What ``fit`` returned: the best restart, or the linear model (the
     network without hidden layers, trained by the same schedule; the
     network computes it with its output layer silent) when no restart
-    whose free run stays bounded at twice the training amplitude beat
-    it, with a warning. A model without hidden layers is its restarts'
-    best.
+    whose free run stays bounded at twice the training amplitude (and,
+    with validation records, fits the training records no worse than the
+    linear model) beat it, with a warning. A model without hidden layers
+    is its restarts' best.
+validation_burn_in_ : int or None
+    Leading samples of every validation record simulated from rest left
+    out of the validation score (the burn-in, or the window below); 0
+    for records that start at rest or are the tail of a training record;
+    None without validation records.
+validation_start_window_ : int or None
+    Where a validation record's initial state is not forgotten within
+    half of it (an integrating plant) and fitting it to the record's first
+    samples (as ``y_init`` does) at least halves the linear model's
+    validation error, the number of those samples, fitted before each
+    validation run; 0 otherwise, None without validation records.
 linear_score_ : float or None
     Negative selection loss of that linear model; None where it is not a
     candidate (no hidden layer, no linear part, or the ISSM's TDL start).

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import numbers
+from dataclasses import replace
 from itertools import pairwise
 
 import numpy as np
@@ -32,6 +33,7 @@ from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_ru
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._order import auto_width, select_order
+from sysid_nn._state_estimation import fit_initial_condition
 from sysid_nn._tdl import TDLRegressor
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]
@@ -545,7 +547,10 @@ default=None
         return Yhat, J, diverged
 
     def _initial_states(self, data: _Data, initial=None) -> np.ndarray:
-        """``X0`` of every sequence: measured part from the history rows."""
+        """``X0`` of every sequence: ``data.X0`` where set, else the measured
+        part from the history rows (and ``initial`` or zeros for the rest)."""
+        if data.X0 is not None and initial is None:
+            return data.X0.copy()
         X0 = np.zeros((len(data.starts) - 1, self.n_states_))
         X0[:, : self.n_outputs_] = data.Y[data.starts[:-1] + data.h - 1]
         if initial is not None:
@@ -662,12 +667,38 @@ default=None
         """Index in ``_linear_starts`` of restart ``k``: the extra one is last."""
         return int(k >= self.n_init) * (len(self._linear_starts) - 1)
 
+    def _estimates_start(self) -> bool:
+        return self.n_states_ > self.n_outputs_
+
+    def _fitted_start(self, w, data, window):
+        # The states whose free run best fits the first ``window`` modelled
+        # rows, as ``y_init`` fits them (output-error least squares).
+        spans = [
+            np.arange(a, min(a + data.h + window, b)) for a, b in pairwise(data.starts)
+        ]
+        rows = np.concatenate(spans)
+        head = _Data(
+            Y=data.Y[rows], U=data.U[rows], h=data.h,
+            starts=np.r_[0, np.cumsum([len(r) for r in spans])],
+        )  # fmt: skip
+        X0 = self._initial_states(data)
+        target = head.Y[head.modelled]
+
+        def residuals(v):
+            Yhat = self._run_from(
+                w, head, _FREE_RUN, False, v.reshape(X0.shape), keep_state=False
+            )[0]
+            return (Yhat[head.modelled] - target).ravel()
+
+        v = fit_initial_condition(residuals, X0.ravel())[0]
+        return replace(data, X0=v.reshape(X0.shape))
+
     def _linear_start_restarts(self) -> list[int]:
         # The extra start is the last restart's.
         return [0] if len(self._linear_starts) == 1 else [0, self.n_init]
 
-    def _keep_training(self, result, with_validation: bool) -> None:
-        super()._keep_training(result, with_validation)
+    def _keep_training(self, result, val) -> None:
+        super()._keep_training(result, val)
         self._linear_restart = result.linear_start
 
     def _fit_one(self, train, val, restart, stop):

@@ -42,6 +42,13 @@ _SETTLED = 0.001
 _MAX_BURN_SHARE = 0.5
 _TRANSIENT = 2.0
 _START = 10
+#: A validation record whose initial state the burn-in cannot wait out
+#: starts from a state fitted to this many samples (at most the longest
+#: burn-in): on the EMPS benchmark 20-400 samples all gave the run from the
+#: tail's accuracy (1.4 mm, against 20 mm from the measured position at rest).
+_START_WINDOW = 50
+#: ... where that at least halves the linear model's validation error.
+_FITTED_START_GAIN = 0.5
 #: Scores (standardised mean squared errors) this close are a tie.
 _TIE = 1e-12
 #: Restarts are disqualified whose free run diverges on the training
@@ -64,6 +71,10 @@ class LinearCandidate:
 def _linear_copy(est):
     """A shallow copy of ``est`` (scaling fitted) with no hidden layer."""
     lin = copy.copy(est)
+    # A method replaced on the network's instance (a patched or wrapped
+    # stage) is the network's: the linear model runs the class's own.
+    for name in [k for k in vars(lin) if callable(getattr(type(lin), k, None))]:
+        del lin.__dict__[name]
     lin.hidden_layer_sizes = ()
     if getattr(est, "n_states", None) == "auto":
         lin.n_states = est.n_states_  # the order the network was given
@@ -106,17 +117,30 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
     lin = _linear_copy(est)
     lin._prepare_structure(train, val)
     n_stages = len(lin._stages())
-    # Through the class: an attribute of the instance (copied) must not
-    # stand in for the method.
     fits = [
-        (type(lin)._fit_one(lin, train, val, new_restart(k), n_stages)[1], k)
+        (lin._fit_one(train, val, new_restart(k), n_stages)[1], k)
         for k in lin._linear_start_restarts()
     ]
     run, k = min(fits, key=lambda fit: fit[0].score)  # the first of equals
     if val is not None and val.skip == 0:
-        val.burn = burn_in(lin, run.w, val)
-        # Scored as the restarts are: on the final objective's segments.
-        loss = validation_loss(lin, run.w, val, lin._final_segment())
+        val.burn, settled = burn_in(lin, run.w, val)
+        seg = lin._final_segment()  # scored as the restarts are
+        if not settled and est._estimates_start():
+            # The initial state is not forgotten within the record (an
+            # integrating plant): where the linear model's run fits the rest
+            # of the records far better from states fitted to their first
+            # samples, validation runs start so (records that start at rest
+            # need not: the hysteretic oscillator's linear models drift and
+            # never forget their start either).
+            window = min(_START_WINDOW, _burn_cap(val))
+            fitted = replace(val, start_window=window, burn=window)
+            at_rest = replace(val, burn=window)
+            gain = validation_loss(lin, run.w, fitted, seg) / max(
+                validation_loss(lin, run.w, at_rest, seg), np.finfo(float).tiny
+            )
+            if gain < _FITTED_START_GAIN:
+                val.start_window = val.burn = window
+        loss = validation_loss(lin, run.w, val, seg)
         run = replace(run, score=loss, val_loss=loss)
     return LinearCandidate(run=run, w=embed_linear(est, run.w), k=k)
 
@@ -139,8 +163,11 @@ def embed_linear(est, w_lin: np.ndarray) -> np.ndarray:
     return w
 
 
-def burn_in(est, w: np.ndarray, data) -> int:
+def burn_in(est, w: np.ndarray, data) -> tuple[int, bool]:
     """Samples until ``w``'s response to its initial state has settled.
+
+    Returns the burn-in and whether the response settled within the longest
+    one in every sequence.
 
     The difference between two free runs over ``data``, one from rest and
     one with every history output one standard deviation higher, falls
@@ -156,30 +183,39 @@ def burn_in(est, w: np.ndarray, data) -> int:
     for a in data.starts[:-1]:
         shifted.Y[a : a + data.h] += 1.0
     runs = [est._run(w, d, _FREE_RUN, False, keep_state=False) for d in (data, shifted)]
-    lengths = np.diff(data.starts) - data.h
-    cap = int(_MAX_BURN_SHARE * lengths.min())
+    cap = _burn_cap(data)
     if any((r[2] >= 0).any() for r in runs):
-        return cap
+        return cap, False
     gap = np.abs(runs[1][0] - runs[0][0]).max(axis=1)
     error = np.sum((runs[0][0] - data.Y) ** 2, axis=1)
-    burn = 0
+    burn, settled = 0, True
     for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
         g, e = gap[a + data.h : b], error[a + data.h : b]
         late = np.flatnonzero(g > _SETTLED * max(g[0], 1e-12))
-        n = min(int(late[-1]) + 1 if late.size else 0, cap)
+        n = int(late[-1]) + 1 if late.size else 0
+        settled = settled and n <= cap
+        n = min(n, cap)
         # A record that starts at rest shows no transient: the linear
         # model from rest fits its first samples no worse than the whole.
         if n and e[:_START].mean() > _TRANSIENT * e.mean():
             burn = max(burn, n)
-    return burn
+    return burn, settled
+
+
+def _burn_cap(data) -> int:
+    """The longest burn-in: ``_MAX_BURN_SHARE`` of the shortest sequence."""
+    return int(_MAX_BURN_SHARE * (np.diff(data.starts) - data.h).min())
 
 
 def validation_loss(est, w: np.ndarray, val, seg: int = _FREE_RUN) -> float:
     """Mean squared error of ``w`` on the scored rows of ``val``.
 
     The model runs over segments of ``seg`` samples (by default the free
-    run); a run that diverged scores ``inf``.
+    run), from the initial states fitted to the first ``val.start_window``
+    rows where that is set; a run that diverged scores ``inf``.
     """
+    if val.start_window:
+        val = est._fitted_start(w, val, val.start_window)
     Yhat, _, diverged, _ = est._run(w, val, seg, False, keep_state=False)
     if (diverged >= 0).any():
         return np.inf
@@ -220,7 +256,7 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
     if val is not None and np.isfinite(lin.loss):
         # ``loss``: the final objective on the training records (the free
         # run where the focus is simulation), alike for both.
-        fitting = [r for r in pool if r.loss <= lin.loss]
+        fitting = [r for r in pool if r.loss <= lin.loss + _TIE * (1.0 + lin.loss)]
         worse = len(pool) - len(fitting)
         best = min(fitting, key=lambda r: r.score) if fitting else None
     else:

@@ -210,6 +210,38 @@ def test_linear_candidate_is_scored_on_the_restarts_objective():
     assert net.linear_score_ == pytest.approx(alone.best_validation_score_, rel=1e-9)
 
 
+def test_validation_record_of_an_integrating_plant_starts_from_a_fitted_state():
+    # A position driven through a lag: the initial state of a validation
+    # record cut from the motion is never forgotten, so no burn-in helps;
+    # from rest (measured position, zero velocity) the ISSM's free run keeps
+    # an offset. The state is fitted to the record's first samples instead.
+    rng = np.random.default_rng(0)
+
+    def record(n):
+        u = rng.standard_normal((n, 1))
+        y = np.cumsum(lfilter([0, 0.1], [1, -0.9], u[:, 0]))
+        return u, y + 0.001 * y.std() * rng.standard_normal(n)
+
+    (u, y), (u_rest, y_rest) = record(1000), record(300)
+    params = dict(n_states=2, hidden_layer_sizes=(3,), n_init=1, max_iter=30)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "The linear model of", UserWarning)
+        net = ISSMRegressor(random_state=0, **params).fit(
+            u[:700], y[:700], X_val=u[700:], y_val=y[700:]
+        )
+        tail = ISSMRegressor(random_state=0, **params).fit(u, y)
+        # A validation record that starts at rest needs no fitted start.
+        rest = ISSMRegressor(random_state=0, **params).fit(
+            u[:700], y[:700], X_val=u_rest, y_val=y_rest
+        )
+    assert net.validation_start_window_ == net.validation_burn_in_ == 50
+    assert tail.validation_start_window_ == tail.validation_burn_in_ == 0
+    assert rest.validation_start_window_ == 0
+    # The validation judges the model, not its ignorance of the start.
+    assert -net.linear_score_ < 1e-3
+    assert -net.best_validation_score_ < 1e-3
+
+
 def test_burn_in_only_for_records_that_start_in_motion():
     from sysid_nn._selection import burn_in
 
@@ -220,6 +252,8 @@ def test_burn_in_only_for_records_that_start_in_motion():
     ).fit(X, y)  # fmt: skip
     at_rest = model._stack([X[:200]], [y[:200, None]])
     in_motion = model._stack([X[600:800]], [y[600:800, None]])
-    assert burn_in(model, model.coefs_, at_rest) == 0
+    assert burn_in(model, model.coefs_, at_rest) == (0, True)
     # The slowest mode (radius 0.92) takes about 80 samples to fall to 0.1 %.
-    assert 40 <= burn_in(model, model.coefs_, in_motion) <= 100
+    burn, settled = burn_in(model, model.coefs_, in_motion)
+    assert 40 <= burn <= 100
+    assert settled

@@ -146,7 +146,9 @@ def test_auto_shooting_follows_the_noise_and_the_solver():
         assert lbfgs.fit(u, noisy).shooting_ == "measured"
     with pytest.raises(ValueError, match=r"shooting='free' .* needs solver='lm'"):
         _net(max_iter=2, shooting="free", solver="lbfgs").fit(u, y)
-    forced = _net(max_iter=2, shooting="free").fit(u, y)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "The linear model of", UserWarning)
+        forced = _net(max_iter=2, shooting="free").fit(u, y)
     assert forced.shooting_ == "free"
     assert forced._smooth_train is None  # the low-passed copy is not kept
 
@@ -159,7 +161,12 @@ def test_free_shooting_stays_accurate_under_output_noise():
     ut, yt = _system(2000, 1)
     rng = np.random.default_rng(2)
     noisy = y + 0.03 * y.std() * rng.standard_normal(len(y))
-    est = _net(hidden_layer_sizes=(5,), max_iter=60).fit(u, noisy)
+    with warnings.catch_warnings():
+        # The linear model, trained by the same free-state schedule, fits
+        # the training record marginally better than the network and may be
+        # returned (measured: test 0.0035 against the network's 0.0038).
+        warnings.filterwarnings("ignore", "The linear model of", UserWarning)
+        est = _net(hidden_layer_sizes=(5,), max_iter=60).fit(u, noisy)
     assert est.shooting_ == "free"
     nrmse = np.sqrt(np.mean((est.simulate(ut) - yt) ** 2)) / yt.std()
     assert nrmse < 0.015
