@@ -107,7 +107,10 @@ PUBLISHED = {
     ("emps", "test"): ("LSTM 0.074, RNN 0.089 (Champneys et al. 2024)", ""),
 }
 
-FIELDS = ["benchmark", "model", "label", "test", "unit", "rmse", "fit_s", "warnings"]
+FIELDS = [
+    "benchmark", "model", "label", "test", "unit", "rmse", "fit_s", "cpu_s", "load",
+    "warnings",
+]  # fmt: skip
 
 
 def _simulate(model, X, name: str, benchmark: str, n_period: int):
@@ -138,9 +141,11 @@ def run_one(benchmark: str, model_name: str, data, validation="tail") -> list[di
     model = factory()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         _fit(model, data, validation)
         fit_s = time.perf_counter() - start
+        cpu_s = time.process_time() - cpu
+    load = os.getloadavg()[0]
     kinds = sorted({w.category.__name__ for w in caught})
     rows = []
     for name, X, y in zip(data.test_names, data.X_test, data.y_test, strict=True):
@@ -155,12 +160,15 @@ def run_one(benchmark: str, model_name: str, data, validation="tail") -> list[di
                 "unit": unit,
                 "rmse": float(np.sqrt(np.mean(err**2)) * scale),
                 "fit_s": round(fit_s, 1),
+                "cpu_s": round(cpu_s, 1),
+                "load": round(load, 1),
                 "warnings": " ".join(kinds),
             }
         )
         print(
             f"{benchmark:>20} {label:>38} {name:>24}: "
-            f"RMSE {rows[-1]['rmse']:.4g} {unit}, fit {fit_s:.1f} s",
+            f"RMSE {rows[-1]['rmse']:.4g} {unit}, fit {fit_s:.1f} s "
+            f"({cpu_s:.1f} CPU-s, load {load:.1f})",
             flush=True,
         )
     return rows
@@ -236,7 +244,10 @@ def _write_markdown(rows: list[dict]) -> None:
         key = (r["benchmark"], r["test"])
         note = "*" if r["warnings"] else ""
         cells.setdefault(key, {})[r["model"]] = f"{float(r['rmse']):.3g}{note}"
-        fits.setdefault(r["benchmark"], {})[r["model"]] = r["fit_s"]
+        cpu = r.get("cpu_s") or "?"
+        fits.setdefault(r["benchmark"], {})[r["model"]] = (
+            f"{r['fit_s']} ({cpu} CPU, load {r.get('load') or '?'})"
+        )
         units[key] = r["unit"]
     held_out = (
         "passed as a separate validation record (`X_val`, simulated from rest)"
@@ -273,7 +284,8 @@ def _write_markdown(rows: list[dict]) -> None:
         )
     lines += [
         "",
-        f"Fit times in seconds ({platform.machine()}, Python "
+        f"Fit times in seconds of wall time (of CPU time, and the 1-minute load "
+        f"average at the end of the fit; {platform.machine()}, Python "
         f"{platform.python_version()}, {os.cpu_count()} cores shared with other "
         "jobs; fits run with the estimators' default single job). The times grow "
         "with the machine's load: on a loaded machine they can be several "
