@@ -164,6 +164,20 @@ def auto_width(n_states: int, n_outputs: int) -> int:
     return max(AUTO_WIDTH, 3 * (n_states - n_outputs))
 
 
+def tdl_auto_width(output_lags: int, n_outputs: int) -> int:
+    """Hidden width of the TDL's ``hidden_layer_sizes="auto"``.
+
+    Three units per fed-back output value (``output_lags`` of each output),
+    at least 7: 9 for three lags of one output, the paper's width.
+
+    Examples
+    --------
+    >>> tdl_auto_width(3, 1), tdl_auto_width(6, 1), tdl_auto_width(1, 1)
+    (9, 18, 7)
+    """
+    return max(AUTO_WIDTH, 3 * output_lags * n_outputs)
+
+
 def _n_weights(est, n: int) -> int:
     """Weights of the auto-sized ISSM network with ``n`` states and its linear part."""
     n_z = n + est.n_features_in_ + est.n_outputs_

@@ -11,11 +11,12 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sysid_nn._base import _RecurrentRegressorBase
 from sysid_nn._data import _FREE_RUN, _Data
 from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._issm_start import lags_per_output
+from sysid_nn._issm_start import ARX_LAGS, lags_per_output
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
 from sysid_nn._layout import MLPLayout
+from sysid_nn._order import tdl_auto_width
 from sysid_nn._shooting import _FreeStateObjective
 from sysid_nn._state_estimation import lowpass
 
@@ -76,9 +77,11 @@ class TDLRegressor(_RecurrentRegressorBase):
     input_delay : int, default=1
         Delay ``n_k`` of the newest excitation sample; 0 gives direct
         feed-through of ``F(t)``.
-    hidden_layer_sizes : int or tuple of int, default=(9,)
+    hidden_layer_sizes : "auto", int or tuple of int, default=(9,)
         Sizes of the hidden layers (an int is one layer, as in
-        ``MLPRegressor``); ``()`` gives the linear model.
+        ``MLPRegressor``); ``()`` gives the linear model. ``"auto"``: one
+        layer of three units per fed-back output value (``output_lags_``
+        times the number of outputs), at least 7.
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_bypass : bool, default=True
@@ -186,6 +189,11 @@ class TDLRegressor(_RecurrentRegressorBase):
             StrOptions({"auto"}),
         ],
         "input_lags": [
+            Interval(numbers.Integral, 1, None, closed="left"),
+            StrOptions({"auto"}),
+        ],
+        "hidden_layer_sizes": [
+            "array-like",
             Interval(numbers.Integral, 1, None, closed="left"),
             StrOptions({"auto"}),
         ],
@@ -316,13 +324,24 @@ such, default=None
         na, nb = self._lags_at_order(n_states)
         return MLPLayout(self._sizes(na, nb), self._bypass()).n_params
 
+    def _hidden_layers(self, na: int | None = None) -> tuple:
+        """Hidden sizes; ``"auto"`` scales with ``na`` output lags (the fitted)."""
+        if not (
+            isinstance(self.hidden_layer_sizes, str)
+            and self.hidden_layer_sizes == "auto"
+        ):
+            return super()._hidden_layers()
+        if na is None:
+            na = getattr(self, "output_lags_", ARX_LAGS)
+        return (tdl_auto_width(na, getattr(self, "n_outputs_", 1)),)
+
     def _sizes(self, na: int | None = None, nb: int | None = None) -> np.ndarray:
         """Layer sizes, with the fitted lags unless ``na`` and ``nb`` are given."""
         na = self.output_lags_ if na is None else na
         nb = self.input_lags_ if nb is None else nb
         n_reg = na * self.n_outputs_ + nb * self.n_features_in_
         return np.array(
-            [n_reg, *self._hidden_layers(), self.n_outputs_], dtype=np.int64
+            [n_reg, *self._hidden_layers(na), self.n_outputs_], dtype=np.int64
         )
 
     def _bypass(self) -> bool:

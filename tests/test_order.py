@@ -307,3 +307,16 @@ def test_plot_order_selection_of_a_tdl():
     labels = [line.get_label() for line in fig.axes[1].get_lines()]
     assert f"n_states {model.order_selection_.n_states}" in labels
     plt.close(fig)
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+def test_auto_width_of_the_tdl_follows_its_lags():
+    X, y = _fourth_order(6500, 0)
+    model = TDLRegressor(hidden_layer_sizes="auto", n_init=1, max_iter=1)
+    model.fit(X, y)
+    # Three units per fed-back output value; the order's weights counted so.
+    assert model.output_lags_ == 8
+    assert model._sizes_.tolist() == [16, 24, 1]
+    assert model._weights_at_order(model.order_selection_.n_states) == len(model.coefs_)
+    few = model.set_params(output_lags=3, input_lags=3).fit(X, y)
+    assert few._sizes_.tolist() == [6, 9, 1]
