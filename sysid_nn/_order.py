@@ -34,10 +34,10 @@ it. The rule, whose inputs are all kept in ``order_selection_``:
   (``gap_order``), at least ``p + 2``.
 
 The TDL network's ``"auto"`` lags are the same order spread over the
-outputs, ``ceil(n_states / p)`` (:func:`sysid_nn._issm_start.lags_per_output`,
-the lags of an ARX model of that order: 3 for the paper's oscillator with its
-displacement measured), and the short-records limit counts the TDL's own
-weights. Both estimators take the rule through
+outputs, ``ceil(n_states / p)`` and at least 3
+(:func:`sysid_nn._issm_start.order_lags`, the lags of the ISSM's ARX start:
+3 for the paper's oscillator), and the short-records limit counts the TDL's
+own weights. Both estimators take the rule through
 ``_RecurrentRegressorBase._choose_order``.
 """
 

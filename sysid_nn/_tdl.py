@@ -11,7 +11,7 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sysid_nn._base import _RecurrentRegressorBase
 from sysid_nn._data import _FREE_RUN, _Data
 from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._issm_start import ARX_LAGS, lags_per_output
+from sysid_nn._issm_start import ARX_LAGS, order_lags
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
@@ -68,9 +68,9 @@ class TDLRegressor(_RecurrentRegressorBase):
         Number of past outputs fed back (``n_a``, "n" in eq. 4). ``"auto"``
         spreads the order :class:`ISSMRegressor`'s ``n_states="auto"`` reads
         from the data over the outputs, ``ceil(n_states / n_outputs)`` lags
-        (3 for the paper's oscillator with its displacement measured, 6 on
-        the Silverbox and Wiener-Hammerstein benchmarks); the evidence is
-        kept in ``order_selection_``.
+        and at least 3, the lags of the ISSM's ARX start (3 for the paper's
+        oscillator, 6 on the Silverbox and Wiener-Hammerstein benchmarks);
+        the evidence is kept in ``order_selection_``.
     input_lags : int or "auto", default="auto"
         Number of excitation samples seen (``n_b``, "m" in eq. 4); ``"auto"``
         as for ``output_lags``, the same number.
@@ -311,7 +311,7 @@ such, default=None
 
     def _lags_at_order(self, n_states: int) -> tuple[int, int]:
         """Output and input lags at an order of ``n_states`` (the "auto" ones)."""
-        lags = lags_per_output(n_states, self.n_outputs_)
+        lags = order_lags(n_states, self.n_outputs_)
         return tuple(
             lags if given == "auto" else int(given)
             for given in (self.output_lags, self.input_lags)

@@ -16,7 +16,7 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, KFold
 
 from sysid_nn import HystereticOscillator, ISSMRegressor, ShearBuilding, TDLRegressor
-from sysid_nn._issm_start import lags_per_output
+from sysid_nn._issm_start import lags_per_output, order_lags
 from sysid_nn._order import (
     ORDER_FLOOR,
     ORDER_TOLERANCE,
@@ -209,22 +209,22 @@ def test_auto_lags_grow_with_the_systems_order():
     assert lags[2] < lags[4]
 
 
-@pytest.mark.parametrize(
-    ("outputs", "lags"), [(("displacement",), 3), (("displacement", "velocity"), 2)]
-)
-def test_auto_lags_of_the_oscillator(outputs, lags):
-    # Displacement alone: the former default of three lags. With velocity
-    # too, four states (as the ISSM's) over two outputs.
+@pytest.mark.parametrize("outputs", [("displacement",), ("displacement", "velocity")])
+def test_auto_lags_of_the_oscillator_are_the_former_default(outputs):
+    # Displacement alone: three states, three lags. With velocity too, four
+    # states over two outputs would be 2 lags each; the floor of 3 keeps
+    # the lags the oscillator needs.
     rec = HystereticOscillator().generate(3, n_samples=2000, random_state=2024)
     X = [f[:, None] for f in rec.excitation]
     y = [np.column_stack([rec[name][i] for name in outputs]) for i in range(3)]
     model = TDLRegressor(n_init=1, max_iter=2, random_state=0)
     model.fit(X[:1], y[:1], X_val=X[1:], y_val=y[1:])
+    p = len(outputs)
     n = model.order_selection_.n_states
-    assert n == len(outputs) + 2
-    assert lags_per_output(n, len(outputs)) == lags
-    assert model.output_lags_ == model.input_lags_ == lags
-    assert model._sizes_.tolist() == [lags * (len(outputs) + 1), 9, len(outputs)]
+    assert n == p + 2
+    assert lags_per_output(n, p) == 4 - p
+    assert model.output_lags_ == model.input_lags_ == order_lags(n, p) == 3
+    assert model._sizes_.tolist() == [3 * (p + 1), 9, p]
 
 
 @pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
