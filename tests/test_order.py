@@ -69,23 +69,22 @@ def test_auto_order_without_separate_validation_data():
     assert model.order_selection_.linear_order == 4
 
 
+def _grid_scores(estimator, name, values, Xs, ys):
+    """4-fold grid search over one parameter: the search and its mean scores."""
+    search = GridSearchCV(estimator, {name: values}, cv=KFold(4))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        search.fit(list(Xs), list(ys))
+    results = search.cv_results_
+    scores = zip(results[f"param_{name}"], results["mean_test_score"], strict=True)
+    return search, dict(scores)
+
+
 def test_grid_search_over_orders_agrees_with_auto():
     Xs, ys = zip(*(_fourth_order(800, seed) for seed in range(4)), strict=True)
     Xs, ys = list(Xs), list(ys)
-    search = GridSearchCV(
-        _linear_issm(early_stopping=False),
-        {"n_states": [2, 3, 4, 5, "auto"]},
-        cv=KFold(4),
-    )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        search.fit(Xs, ys)
-    score = dict(
-        zip(
-            search.cv_results_["param_n_states"],
-            search.cv_results_["mean_test_score"],
-            strict=True,
-        )
+    search, score = _grid_scores(
+        _linear_issm(early_stopping=False), "n_states", [2, 3, 4, 5, "auto"], Xs, ys
     )
     # Orders below the system's are clearly worse; from 4 on they agree.
     assert score[3] < score[4] - 0.01
@@ -280,20 +279,8 @@ def test_short_records_lower_the_tdl_lags():
 
 def test_grid_search_over_given_lags_beside_auto():
     Xs, ys = zip(*(_fourth_order(800, seed) for seed in range(4)), strict=True)
-    search = GridSearchCV(
-        _linear_tdl(early_stopping=False),
-        {"output_lags": [2, 8, "auto"]},
-        cv=KFold(4),
-    )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        search.fit(list(Xs), list(ys))
-    score = dict(
-        zip(
-            search.cv_results_["param_output_lags"],
-            search.cv_results_["mean_test_score"],
-            strict=True,
-        )
+    search, score = _grid_scores(
+        _linear_tdl(early_stopping=False), "output_lags", [2, 8, "auto"], Xs, ys
     )
     assert score[2] < score[8] - 0.01
     assert score["auto"] > search.best_score_ - 1e-3
