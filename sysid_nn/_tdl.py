@@ -245,9 +245,10 @@ class TDLRegressor(_RecurrentRegressorBase):
         Parameters
         ----------
         %(excitation)s
-        initial_outputs : array-like of shape (output_lags_, n_outputs) or \
-(output_lags_,), or list of such, default=None
-            Measured outputs just before the first sample, oldest first.
+        initial_outputs : array-like of shape (n_lags, n_outputs) or \
+(n_lags,), or list of such, default=None
+            Measured outputs just before the first sample, oldest first;
+            ``n_lags`` is the fitted ``output_lags_``.
             Default: zero initial conditions, as in the paper.
         initial_inputs : array-like of shape (n_past, n_inputs), or list of \
 such, default=None
