@@ -177,7 +177,7 @@ def summary(values) -> dict:
 def simulate_from_measured(model, X, y, k0: int, p: int, filtered: bool = False):
     """Free run started at sample ``k0`` from the measured outputs before it.
 
-    TDL: ``initial_outputs`` = the measured outputs ``y[k0 - output_lags:k0]``;
+    TDL: ``initial_outputs`` = the measured outputs ``y[k0 - output_lags_:k0]``;
     ISSM: ``initial_state`` = the measured outputs at ``k0 - 1`` as the first
     ``p`` states, zeros (rest) for the unmeasured ones. Both are given the
     measured excitation before ``k0`` (``initial_inputs``), so that the only
@@ -190,7 +190,7 @@ def simulate_from_measured(model, X, y, k0: int, p: int, filtered: bool = False)
     of zero.
     """
     if hasattr(model, "output_lags"):
-        kwargs = {"initial_outputs": y[k0 - model.output_lags : k0]}
+        kwargs = {"initial_outputs": y[k0 - model.output_lags_ : k0]}
     else:
         y0 = np.atleast_1d(y[k0 - 1])
         rest = np.zeros(model.n_states_ - p)

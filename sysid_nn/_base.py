@@ -47,6 +47,7 @@ from sysid_nn._diagnosis import RecordDiagnosis, diagnose_records, warn_white_mi
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._exceptions import DivergenceWarning, check_version, version_stamp
 from sysid_nn._layout import MLPLayout
+from sysid_nn._order import select_order
 from sysid_nn._record_checks import trim_padding
 from sysid_nn._schedule import training_stages
 from sysid_nn._solvers import _Objective
@@ -263,10 +264,12 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         Xc, yc = np.concatenate(Xs), np.concatenate(ys)
         self._x_mean, self._x_scale = _mean_scale(Xc, "X")
         self._y_mean, self._y_scale = _mean_scale(yc, "y")
-        train_data = self._stack(Xs, ys)
-        val = self._stack(Xv, yv) if Xv is not None else None
-        if val is not None:
-            val.skip = skip
+        train_data, val = self._stack_fit_records(Xs, ys, Xv, yv, skip)
+        with _single_threaded_blas():
+            self._choose_order(train_data, val)
+        if self._history_length() != train_data.h:
+            # The chosen lags reach further back than the provisional ones.
+            train_data, val = self._stack_fit_records(Xs, ys, Xv, yv, skip)
         self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train_data.Y).max())
         self._diagnose(train_data)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
@@ -298,6 +301,41 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
                 stacklevel=3,
             )
         return self
+
+    def _stack_fit_records(self, Xs, ys, Xv, yv, skip: int):
+        """The training and validation records stacked (validation tail ``skip``)."""
+        train = self._stack(Xs, ys)
+        val = self._stack(Xv, yv) if Xv is not None else None
+        if val is not None:
+            val.skip = skip
+        return train, val
+
+    def _choose_order(self, train: _Data, val: _Data | None) -> None:
+        """The order of an ``"auto"`` structure, read from the records.
+
+        One rule for both networks (:func:`sysid_nn._order.select_order`),
+        scored on ``val`` (``train`` when there is none); its evidence is
+        kept in ``order_selection_``.
+        """
+        self.__dict__.pop("order_selection_", None)  # from an earlier fit
+        if not self._order_from_data():
+            return
+        self.order_selection_ = select_order(
+            self, train, train if val is None else val, self._weights_at_order
+        )
+        self._set_order(int(self.order_selection_.n_states))
+
+    def _order_from_data(self) -> bool:
+        """Whether the structure's order is ``"auto"``."""
+        return False
+
+    def _set_order(self, n_states: int) -> None:  # pragma: no cover - abstract
+        """Fix the structure for an order of ``n_states`` states."""
+        raise NotImplementedError
+
+    def _weights_at_order(self, n_states: int) -> int:  # pragma: no cover
+        """Weights of the network at an order of ``n_states`` states."""
+        raise NotImplementedError
 
     def _keep_training(self, result, val: _Data | None) -> None:
         """The fitted attributes of a :class:`~sysid_nn._training.Training`."""

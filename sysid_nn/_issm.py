@@ -32,7 +32,7 @@ from sysid_nn._issm_start import (
 from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_run
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
-from sysid_nn._order import auto_width, select_order
+from sysid_nn._order import _n_weights, auto_width
 from sysid_nn._state_estimation import fit_initial_condition
 from sysid_nn._tdl import TDLRegressor
 
@@ -452,7 +452,7 @@ default=None
             return
         if self.n_states == "auto":
             # Provisional (the reach of the linear start); the order is
-            # chosen from the data in _prepare_structure.
+            # chosen from the data in _choose_order.
             self.n_states_ = p + 2
             return
         if self.n_states is not None and self.n_states < p:
@@ -463,6 +463,17 @@ default=None
                 f"n_outputs + 2."
             )
         self.n_states_ = int(self.n_states) if self.n_states is not None else p + 2
+
+    def _order_from_data(self) -> bool:
+        return self.n_states == "auto" and self.init != "tdl"
+
+    def _set_order(self, n_states: int) -> None:
+        # Chosen before the diagnosis: the segment starts follow the order
+        # (_choose_shooting).
+        self.n_states_ = n_states
+
+    def _weights_at_order(self, n_states: int) -> int:
+        return _n_weights(self, n_states)
 
     def _hidden_layers(self) -> tuple:
         if not (
@@ -601,16 +612,8 @@ default=None
         return self
 
     def _prepare_structure(self, data: _Data, val: _Data | None = None) -> None:
-        # The order (_order), then the linear start (_issm_start) or the
-        # realised TDL network (_issm_realisation).
-        self.__dict__.pop("order_selection_", None)  # from an earlier fit
-        if self.n_states == "auto" and self.init != "tdl":
-            self.order_selection_ = select_order(
-                self, data, data if val is None else val
-            )
-            self.n_states_ = int(self.order_selection_.n_states)
-            # The segment starts follow the order (_choose_shooting).
-            self.shooting_ = self._choose_shooting(False)
+        # The order is chosen (_choose_order); the linear start
+        # (_issm_start) or the realised TDL network (_issm_realisation).
         self._sizes_ = self._sizes()
         self._act = ACTIVATIONS[self.activation]
         self.init_ = self._chosen_start(data)

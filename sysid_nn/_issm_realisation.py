@@ -67,7 +67,7 @@ def realise_tdl(est, tdl: TDLRegressor) -> tuple[np.ndarray, Bunch]:
     the linear part ``A, B, K, c``.
     """
     p, m, n = est.n_outputs_, est.n_features_in_, est.n_states_
-    na, nb = tdl.output_lags, tdl.input_lags
+    na, nb = tdl.output_lags_, tdl.input_lags_
     nz = n + m + p
     sy, my, sx, mx = est._y_scale, est._y_mean, est._x_scale, est._x_mean
     ty, tmy, tx, tmx = tdl._y_scale, tdl._y_mean, tdl._x_scale, tdl._x_mean

@@ -1,4 +1,4 @@
-"""The ISSM's order from the data: ``n_states="auto"``.
+"""The order from the data: the ISSM's ``n_states="auto"``, the TDL's lags.
 
 One subspace projection of the training records (:mod:`sysid_nn._subspace`)
 gives the singular values, which fall off after the system's order, and a
@@ -33,6 +33,12 @@ it. The rule, whose inputs are all kept in ``order_selection_``:
   an integrator), the order is the singular values' largest gap
   (``gap_order``), at least ``p + 2``.
 
+The TDL network's ``"auto"`` lags are the same order spread over the
+outputs, ``ceil(n_states / p)`` and at least 3
+(:func:`sysid_nn._issm_start.order_lags`, the lags of the ISSM's ARX start:
+3 for the paper's oscillator), and the short-records limit counts the TDL's
+own weights. Both estimators take the rule through
+``_RecurrentRegressorBase._choose_order``.
 """
 
 from __future__ import annotations
@@ -42,7 +48,11 @@ from itertools import pairwise
 import numpy as np
 from sklearn.utils import Bunch
 
-from sysid_nn._issm_start import subspace_horizon, subspace_records
+from sysid_nn._issm_start import (
+    lags_per_output,
+    subspace_horizon,
+    subspace_records,
+)
 from sysid_nn._kernels._linear import linear_free_run
 from sysid_nn._subspace import output_error_model, projection
 
@@ -64,10 +74,12 @@ AUTO_WIDTH = 7
 RELIABLE_NRMSE = 0.4
 
 
-def select_order(est, train, val) -> Bunch:
+def select_order(est, train, val, n_weights) -> Bunch:
     """Choose the number of states from ``train``, scored on ``val``.
 
-    ``est`` is the ISSM being fitted (standardisation and sizes set).
+    ``est`` is the estimator being fitted (standardisation and sizes set);
+    ``n_weights(n)`` counts the weights of its network with ``n`` states
+    (the short-records rule).
     Returns the Bunch stored as ``order_selection_``: ``orders`` (the
     candidates), ``scores`` (validation free-run NRMSE of their linear
     models, ``inf`` for one that diverged), ``singular_values`` (of the
@@ -114,9 +126,7 @@ def select_order(est, train, val) -> Bunch:
         n_states = max(gap_order, p + 2)
     # Short records: no more weights than a tenth of the training samples.
     n_samples = len(train.modelled) * p
-    while (
-        n_states > p + 2 and _n_weights(est, n_states) * SAMPLES_PER_WEIGHT > n_samples
-    ):
+    while n_states > p + 2 and n_weights(n_states) * SAMPLES_PER_WEIGHT > n_samples:
         n_states -= 1
     return Bunch(
         orders=orders,
@@ -141,7 +151,7 @@ def extra_states(linear_order: int, n_outputs: int) -> int:
     >>> extra_states(6, 3), extra_states(10, 5), extra_states(3, 1)
     (3, 5, 3)
     """
-    return max(n_outputs, -(-linear_order // n_outputs))
+    return max(n_outputs, lags_per_output(linear_order, n_outputs))
 
 
 def auto_width(n_states: int, n_outputs: int) -> int:
@@ -154,8 +164,22 @@ def auto_width(n_states: int, n_outputs: int) -> int:
     return max(AUTO_WIDTH, 3 * (n_states - n_outputs))
 
 
+def tdl_auto_width(output_lags: int, n_outputs: int) -> int:
+    """Hidden width of the TDL's ``hidden_layer_sizes="auto"``.
+
+    Three units per fed-back output value (``output_lags`` of each output),
+    at least 7: 9 for three lags of one output, the paper's width.
+
+    Examples
+    --------
+    >>> tdl_auto_width(3, 1), tdl_auto_width(6, 1), tdl_auto_width(1, 1)
+    (9, 18, 7)
+    """
+    return max(AUTO_WIDTH, 3 * output_lags * n_outputs)
+
+
 def _n_weights(est, n: int) -> int:
-    """Weights of the auto-sized network with ``n`` states and its linear part."""
+    """Weights of the auto-sized ISSM network with ``n`` states and its linear part."""
     n_z = n + est.n_features_in_ + est.n_outputs_
     width = auto_width(n, est.n_outputs_)
     return n_z * width + width + width * n + n + n * n_z

@@ -11,9 +11,12 @@ from sklearn.utils._param_validation import Interval, StrOptions
 from sysid_nn._base import _RecurrentRegressorBase
 from sysid_nn._data import _FREE_RUN, _Data
 from sysid_nn._estimator_docs import document_estimator
+from sysid_nn._issm_start import ARX_LAGS, order_lags
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
+from sysid_nn._layout import MLPLayout
+from sysid_nn._order import tdl_auto_width
 from sysid_nn._shooting import _FreeStateObjective
 from sysid_nn._state_estimation import lowpass
 
@@ -49,8 +52,9 @@ class TDLRegressor(_RecurrentRegressorBase):
     for the quasi-Newton solvers.
 
     The defaults are the setting that identified the hysteretic oscillator
-    best on unseen realisations (see the accuracy benchmark): three output and
-    three excitation lags, lags seen in difference coordinates, a linear
+    best on unseen realisations (see the accuracy benchmark): the lags read
+    from the data (three output and three excitation lags there), lags seen
+    in difference coordinates, a linear
     bypass started at the least-squares ARX fit, free-run ("simulation")
     focus reached through one-step and multiple-shooting stages, with
     validation selection over four restarts. The paper's network is
@@ -60,16 +64,24 @@ class TDLRegressor(_RecurrentRegressorBase):
 
     Parameters
     ----------
-    output_lags : int, default=3
-        Number of past outputs fed back (``n_a``, "n" in eq. 4).
-    input_lags : int, default=3
-        Number of excitation samples seen (``n_b``, "m" in eq. 4).
+    output_lags : int or "auto", default="auto"
+        Number of past outputs fed back (``n_a``, "n" in eq. 4). ``"auto"``
+        spreads the order :class:`ISSMRegressor`'s ``n_states="auto"`` reads
+        from the data over the outputs, ``ceil(n_states / n_outputs)`` lags
+        and at least 3, the lags of the ISSM's ARX start (3 for the paper's
+        oscillator, 6 on the Silverbox and Wiener-Hammerstein benchmarks);
+        the evidence is kept in ``order_selection_``.
+    input_lags : int or "auto", default="auto"
+        Number of excitation samples seen (``n_b``, "m" in eq. 4); ``"auto"``
+        as for ``output_lags``, the same number.
     input_delay : int, default=1
         Delay ``n_k`` of the newest excitation sample; 0 gives direct
         feed-through of ``F(t)``.
-    hidden_layer_sizes : int or tuple of int, default=(9,)
+    hidden_layer_sizes : "auto", int or tuple of int, default=(9,)
         Sizes of the hidden layers (an int is one layer, as in
-        ``MLPRegressor``); ``()`` gives the linear model.
+        ``MLPRegressor``); ``()`` gives the linear model. ``"auto"``: one
+        layer of three units per fed-back output value (``output_lags_``
+        times the number of outputs), at least 7.
     activation : {"tanh", "logistic"}, default="tanh"
         Hidden-layer activation; the paper uses the logistic sigmoid (eq. 2).
     linear_bypass : bool, default=True
@@ -120,6 +132,17 @@ class TDLRegressor(_RecurrentRegressorBase):
     ----------
     coefs_ : ndarray
         Flat parameter vector (network weights and biases, then the bypass).
+    output_lags_ : int
+        Number of past outputs fed back (``output_lags`` with ``"auto"``
+        resolved).
+    input_lags_ : int
+        Number of excitation samples seen (``input_lags`` with ``"auto"``
+        resolved).
+    order_selection_ : Bunch
+        With ``"auto"`` lags only: the evidence for the order, as
+        :class:`ISSMRegressor`'s ``order_selection_`` (``n_states`` is the
+        order the lags hold); drawn by
+        :func:`~sysid_nn.plotting.plot_order_selection`.
     n_features_in_ : int
         Number of excitation channels.
     n_outputs_ : int
@@ -161,8 +184,19 @@ class TDLRegressor(_RecurrentRegressorBase):
 
     _parameter_constraints: dict = {
         **_RecurrentRegressorBase._parameter_constraints,
-        "output_lags": [Interval(numbers.Integral, 1, None, closed="left")],
-        "input_lags": [Interval(numbers.Integral, 1, None, closed="left")],
+        "output_lags": [
+            Interval(numbers.Integral, 1, None, closed="left"),
+            StrOptions({"auto"}),
+        ],
+        "input_lags": [
+            Interval(numbers.Integral, 1, None, closed="left"),
+            StrOptions({"auto"}),
+        ],
+        "hidden_layer_sizes": [
+            "array-like",
+            Interval(numbers.Integral, 1, None, closed="left"),
+            StrOptions({"auto"}),
+        ],
         "linear_bypass": ["boolean"],
         "lag_representation": [StrOptions({"differences", "delays"})],
         "shooting": [StrOptions({"auto", "measured", "free"})],
@@ -170,8 +204,8 @@ class TDLRegressor(_RecurrentRegressorBase):
 
     def __init__(
         self,
-        output_lags=3,
-        input_lags=3,
+        output_lags="auto",
+        input_lags="auto",
         input_delay=1,
         hidden_layer_sizes=(9,),
         activation="tanh",
@@ -211,16 +245,17 @@ class TDLRegressor(_RecurrentRegressorBase):
         Parameters
         ----------
         %(excitation)s
-        initial_outputs : array-like of shape (output_lags, n_outputs) or \
-(output_lags,), or list of such, default=None
-            Measured outputs just before the first sample, oldest first.
+        initial_outputs : array-like of shape (n_lags, n_outputs) or \
+(n_lags,), or list of such, default=None
+            Measured outputs just before the first sample, oldest first;
+            ``n_lags`` is the fitted ``output_lags_``.
             Default: zero initial conditions, as in the paper.
         initial_inputs : array-like of shape (n_past, n_inputs), or list of \
 such, default=None
             Measured excitation just before the first sample, oldest first
             (1-D for one input). Default: zero excitation before the start.
             Give it with ``initial_outputs`` to continue a record from the
-            middle of the motion; only the last ``input_delay + input_lags -
+            middle of the motion; only the last ``input_delay + input_lags_ -
             1`` rows are used.
         y_init : array-like of shape (n_window, n_outputs), or list, default=None
             Measured outputs over the first ``n_window`` samples of ``X`` (the
@@ -228,7 +263,7 @@ such, default=None
             that starts from an unknown state. The initial outputs are
             estimated from them: the ones whose free run fits the window best
             in the least-squares sense, an output-error fit of
-            ``output_lags`` values that averages out white measurement noise
+            ``output_lags_`` values that averages out white measurement noise
             (measured outputs taken as ``initial_outputs`` would carry the
             noise into the run). The
             whole record is simulated from the estimate; score it after the
@@ -265,14 +300,49 @@ such, default=None
 
     # ---------------------------------------------------------- structure
     def _history_length(self) -> int:
-        return max(self.output_lags, self.input_delay + self.input_lags - 1)
+        return max(self.output_lags_, self.input_delay + self.input_lags_ - 1)
 
-    def _sizes(self) -> np.ndarray:
-        n_reg = (
-            self.output_lags * self.n_outputs_ + self.input_lags * self.n_features_in_
+    def _validate_outputs(self) -> None:
+        # Provisional "auto" lags (those of p + 2 states, the reach the
+        # record checks read); chosen from the data in _choose_order.
+        self._set_order(self.n_outputs_ + 2)
+
+    def _order_from_data(self) -> bool:
+        return "auto" in (self.output_lags, self.input_lags)
+
+    def _lags_at_order(self, n_states: int) -> tuple[int, int]:
+        """Output and input lags at an order of ``n_states`` (the "auto" ones)."""
+        lags = order_lags(n_states, self.n_outputs_)
+        return tuple(
+            lags if given == "auto" else int(given)
+            for given in (self.output_lags, self.input_lags)
         )
+
+    def _set_order(self, n_states: int) -> None:
+        self.output_lags_, self.input_lags_ = self._lags_at_order(n_states)
+
+    def _weights_at_order(self, n_states: int) -> int:
+        na, nb = self._lags_at_order(n_states)
+        return MLPLayout(self._sizes(na, nb), self._bypass()).n_params
+
+    def _hidden_layers(self, na: int | None = None) -> tuple:
+        """Hidden sizes; ``"auto"`` scales with ``na`` output lags (the fitted)."""
+        if not (
+            isinstance(self.hidden_layer_sizes, str)
+            and self.hidden_layer_sizes == "auto"
+        ):
+            return super()._hidden_layers()
+        if na is None:
+            na = getattr(self, "output_lags_", ARX_LAGS)
+        return (tdl_auto_width(na, getattr(self, "n_outputs_", 1)),)
+
+    def _sizes(self, na: int | None = None, nb: int | None = None) -> np.ndarray:
+        """Layer sizes, with the fitted lags unless ``na`` and ``nb`` are given."""
+        na = self.output_lags_ if na is None else na
+        nb = self.input_lags_ if nb is None else nb
+        n_reg = na * self.n_outputs_ + nb * self.n_features_in_
         return np.array(
-            [n_reg, *self._hidden_layers(), self.n_outputs_], dtype=np.int64
+            [n_reg, *self._hidden_layers(na), self.n_outputs_], dtype=np.int64
         )
 
     def _bypass(self) -> bool:
@@ -286,25 +356,25 @@ such, default=None
         Yh = [y0.copy() for _ in range(n_seq)]
         if initial is not None:
             for s, init in enumerate(initial):
-                Yh[s][h - self.output_lags :] = (init - self._y_mean) / self._y_scale
+                Yh[s][h - self.output_lags_ :] = (init - self._y_mean) / self._y_scale
         return Yh, [u0] * n_seq
 
     def _initial_layout(self):
-        shape = (self.output_lags, self.n_outputs_)
-        count = f"output_lags x n_outputs = {shape}"
+        shape = (self.output_lags_, self.n_outputs_)
+        count = f"output_lags_ x n_outputs = {shape}"
         return shape, count, "the last measured outputs, oldest first"
 
     def _initial_units(self):
-        shape = (self.output_lags, 1)
+        shape = (self.output_lags_, 1)
         return np.tile(self._y_mean, shape), np.tile(self._y_scale, shape)
 
     def _initial_guess(self, y0):
-        return np.tile(y0, (self.output_lags, 1))
+        return np.tile(y0, (self.output_lags_, 1))
 
     def _regressors(self, data: _Data) -> np.ndarray:
         """One-step regressor matrix ``phi`` of the modelled rows (measured y)."""
         rows = data.modelled
-        na, nb, nk = self.output_lags, self.input_lags, self.input_delay
+        na, nb, nk = self.output_lags_, self.input_lags_, self.input_delay
         blocks = [data.Y[rows - i] for i in range(1, na + 1)]
         blocks += [data.U[rows - nk - i] for i in range(nb)]
         return np.hstack(blocks)
@@ -339,7 +409,7 @@ such, default=None
 
     def _free_state_objective(self, data, seg, mask, n_res, alpha):
         return _FreeStateObjective(
-            self, data, seg, mask, n_res, self.output_lags, self._smooth_train, alpha
+            self, data, seg, mask, n_res, self.output_lags_, self._smooth_train, alpha
         )
 
     def _independent_segments(self) -> bool:
@@ -358,8 +428,8 @@ such, default=None
             # difference is mostly noise.
             Y, U = lowpass(data.Y, data.U, data.starts, data.h, self._band_edge)
             data = self._smooth_train = _Data(Y=Y, U=U, starts=data.starts, h=data.h)
-        na, p = self.output_lags, self.n_outputs_
-        n_reg = na * p + self.input_lags * self.n_features_in_
+        na, p = self.output_lags_, self.n_outputs_
+        n_reg = na * p + self.input_lags_ * self.n_features_in_
         S = np.eye(n_reg)
         phi = self._regressors(data)
         if self.lag_representation == "differences":
@@ -393,7 +463,7 @@ such, default=None
         ``_ARX_GROWTH``-fold over ``n`` samples, the longest record: an
         integrating structure keeps its pole at one.
         """
-        na, p = self.output_lags, self.n_outputs_
+        na, p = self.output_lags_, self.n_outputs_
         design = np.hstack([Z, np.ones((len(Z), 1))])
         for k in range(na, -1, -1):
             # Columns of output lags beyond k (plain lags, or differences of
@@ -407,7 +477,7 @@ such, default=None
 
     def _arx_radius(self, theta: np.ndarray) -> float:
         """Spectral radius of the block companion matrix of an ARX fit."""
-        na, p = self.output_lags, self.n_outputs_
+        na, p = self.output_lags_, self.n_outputs_
         lags = (self._S.T @ theta[:-1])[: na * p]  # plain lag coefficients
         C = np.eye(na * p, k=-p)
         C[:p] = lags.T
@@ -435,13 +505,13 @@ such, default=None
         return self._sizes_, self._act, self._bypass(), self._S
 
     def _lags(self) -> tuple[int, int, int]:
-        return self.output_lags, self.input_lags, self.input_delay
+        return self.output_lags_, self.input_lags_, self.input_delay
 
     def _run(self, w, data, seg_len, want_jac, keep_state=True):
         n_rows, n_out = data.Y.shape[0], self.n_outputs_
         n_mod = n_rows - data.h * (len(data.starts) - 1)  # modelled rows
         mode, J, JtJ, Jtr = jacobian_buffers(
-            want_jac, n_mod * n_out, (self.output_lags + 1) * n_out, len(w)
+            want_jac, n_mod * n_out, (self.output_lags_ + 1) * n_out, len(w)
         )
         Yhat = np.empty_like(data.Y)
         kept = n_rows if keep_state else 0
@@ -458,7 +528,7 @@ such, default=None
         Yhat, Z, A = state
         grad = np.zeros(len(w))
         tdl_gradient(w, *self._network(), data.Y, data.starts, data.h,
-                     self.output_lags, seg_len, Yhat, Z, A, grad)  # fmt: skip
+                     self.output_lags_, seg_len, Yhat, Z, A, grad)  # fmt: skip
         return grad
 
     def _run_horizon(self, w, data, horizon):

@@ -645,7 +645,10 @@ def plot_band(
 
 
 def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) -> Figure:
-    """The evidence behind ``n_states="auto"`` of a fitted :class:`ISSMRegressor`.
+    """The evidence behind an ``"auto"`` order of a fitted model.
+
+    The ``n_states="auto"`` of an :class:`ISSMRegressor`, or the ``"auto"``
+    lags of a :class:`TDLRegressor` (``ceil(n_states / n_outputs)`` each).
 
     Top: the leading singular values of the subspace projection (log
     scale), with the order after their largest gap marked. Bottom: the
@@ -655,8 +658,9 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
 
     Parameters
     ----------
-    estimator : ISSMRegressor
-        Fitted with ``n_states="auto"`` (it has ``order_selection_``).
+    estimator : ISSMRegressor or TDLRegressor
+        Fitted with ``n_states="auto"`` or ``"auto"`` lags (it has
+        ``order_selection_``).
     ax : pair of Axes, optional
         Axes for the two panels; a new figure if None.
 
@@ -684,8 +688,8 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
     if selection is None or selection.linear_order is None:
         raise ValueError(
             "estimator has no order selection to draw: fit an ISSMRegressor "
-            'with n_states="auto" on records long enough for it (see '
-            "order_selection_) first."
+            'with n_states="auto" (or a TDLRegressor with "auto" lags) on '
+            "records long enough for it (see order_selection_) first."
         )
     top, bottom = _new_panels(ax, 2, figsize=(6.4, 6.4))
     sv = np.asarray(selection.singular_values, dtype=float)

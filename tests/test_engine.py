@@ -130,7 +130,10 @@ def _arx_records(n, length=200, seed=0):
 
 
 def _small(**params):
+    # The lags of the oscillator (the rule's choice on longer records).
     base = dict(
+        output_lags=3,
+        input_lags=3,
         hidden_layer_sizes=(3,),
         n_init=2,
         max_iter=8,

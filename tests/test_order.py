@@ -1,4 +1,4 @@
-"""Tests of the ISSM's order chosen from the data (``n_states="auto"``)."""
+"""Tests of the order chosen from the data (ISSM ``n_states="auto"``, TDL lags)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,8 @@ from scipy.signal import lfilter
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, KFold
 
-from sysid_nn import ISSMRegressor, ShearBuilding
+from sysid_nn import HystereticOscillator, ISSMRegressor, ShearBuilding, TDLRegressor
+from sysid_nn._issm_start import lags_per_output, order_lags
 from sysid_nn._order import (
     ORDER_FLOOR,
     ORDER_TOLERANCE,
@@ -68,23 +69,22 @@ def test_auto_order_without_separate_validation_data():
     assert model.order_selection_.linear_order == 4
 
 
+def _grid_scores(estimator, name, values, Xs, ys):
+    """4-fold grid search over one parameter: the search and its mean scores."""
+    search = GridSearchCV(estimator, {name: values}, cv=KFold(4))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        search.fit(list(Xs), list(ys))
+    results = search.cv_results_
+    scores = zip(results[f"param_{name}"], results["mean_test_score"], strict=True)
+    return search, dict(scores)
+
+
 def test_grid_search_over_orders_agrees_with_auto():
     Xs, ys = zip(*(_fourth_order(800, seed) for seed in range(4)), strict=True)
     Xs, ys = list(Xs), list(ys)
-    search = GridSearchCV(
-        _linear_issm(early_stopping=False),
-        {"n_states": [2, 3, 4, 5, "auto"]},
-        cv=KFold(4),
-    )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        search.fit(Xs, ys)
-    score = dict(
-        zip(
-            search.cv_results_["param_n_states"],
-            search.cv_results_["mean_test_score"],
-            strict=True,
-        )
+    search, score = _grid_scores(
+        _linear_issm(early_stopping=False), "n_states", [2, 3, 4, 5, "auto"], Xs, ys
     )
     # Orders below the system's are clearly worse; from 4 on they agree.
     assert score[3] < score[4] - 0.01
@@ -177,3 +177,133 @@ def test_auto_order_of_a_shear_building_is_its_true_order(n_storeys):
     assert sel.n_outputs == n_storeys
     assert sel.gap_order == sel.linear_order == building.modal_properties().linear_order
     assert model.n_states_ == sel.n_states == 3 * n_storeys
+
+
+# --------------------------------------------------------------------------
+# The TDL's lags (output_lags="auto", input_lags="auto")
+# --------------------------------------------------------------------------
+def _second_order(n, seed):
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(n)
+    return u[:, None], lfilter([0.0, 0.3], A1, u)
+
+
+def _linear_tdl(**params):
+    settings = {"n_init": 1, "max_iter": 20, "random_state": 0, **params}
+    return TDLRegressor(hidden_layer_sizes=(), **settings)
+
+
+def test_auto_lags_grow_with_the_systems_order():
+    # The ISSM's rule: 2 L states for one output, one lag per state.
+    lags = {}
+    for order, records in ((2, _second_order), (4, _fourth_order)):
+        X, y = records(5000, 0)
+        Xv, yv = records(1000, 1)
+        model = _linear_tdl().fit(X, y, X_val=Xv, y_val=yv)
+        sel = model.order_selection_
+        assert sel.linear_order == order
+        assert sel.n_states == 2 * order
+        assert model.output_lags_ == model.input_lags_ == 2 * order
+        lags[order] = model.output_lags_
+    assert lags[2] < lags[4]
+
+
+@pytest.mark.parametrize("outputs", [("displacement",), ("displacement", "velocity")])
+def test_auto_lags_of_the_oscillator_are_the_former_default(outputs):
+    # Displacement alone: three states, three lags. With velocity too, four
+    # states over two outputs would be 2 lags each; the floor of 3 keeps
+    # the lags the oscillator needs.
+    rec = HystereticOscillator().generate(3, n_samples=2000, random_state=2024)
+    X = [f[:, None] for f in rec.excitation]
+    y = [np.column_stack([rec[name][i] for name in outputs]) for i in range(3)]
+    model = TDLRegressor(n_init=1, max_iter=2, random_state=0)
+    model.fit(X[:1], y[:1], X_val=X[1:], y_val=y[1:])
+    p = len(outputs)
+    n = model.order_selection_.n_states
+    assert n == p + 2
+    assert lags_per_output(n, p) == 4 - p
+    assert model.output_lags_ == model.input_lags_ == order_lags(n, p) == 3
+    assert model._sizes_.tolist() == [3 * (p + 1), 9, p]
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+def test_fitted_lags_are_the_models_lags():
+    # The fourth-order system reads further back (8 lags) than the
+    # provisional lags the records are checked with.
+    X, y = _fourth_order(3000, 0, cubic=0.05)
+    params = {"hidden_layer_sizes": (4,), "n_init": 1, "max_iter": 3, "random_state": 0}
+    auto = TDLRegressor(**params).fit(X, y)
+    assert auto.output_lags_ == auto.input_lags_ == 8
+    given = TDLRegressor(output_lags=8, input_lags=8, **params).fit(X, y)
+    assert not hasattr(given, "order_selection_")
+    np.testing.assert_array_equal(auto.coefs_, given.coefs_)
+    np.testing.assert_array_equal(auto.simulate(X[:500]), given.simulate(X[:500]))
+    # The initial outputs of a continued run are the chosen lags' worth.
+    with pytest.raises(ValueError, match=r"\(8, 1\)"):
+        auto.simulate(X[:100], initial_outputs=np.zeros((3, 1)))
+
+
+def test_auto_lags_mix_with_given_ones():
+    X, y = _fourth_order(3000, 2)
+    model = _linear_tdl(output_lags=2).fit(X, y)
+    n = model.order_selection_.n_states
+    assert (
+        (model.output_lags_, model.input_lags_) == (2, lags_per_output(n, 1)) == (2, 8)
+    )
+    model = _linear_tdl(input_lags=1).fit(X, y)
+    assert (model.output_lags_, model.input_lags_) == (8, 1)
+    assert model.get_params()["output_lags"] == "auto"
+    model.set_params(output_lags=4).fit(X, y)
+    assert not hasattr(model, "order_selection_")
+    assert (model.output_lags_, model.input_lags_) == (4, 1)
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+def test_short_records_lower_the_tdl_lags():
+    # At most one weight of the TDL network per ten samples.
+    X, y = _fourth_order(5000, 0)
+    Xv, yv = X[:1000], y[:1000]
+    long = TDLRegressor(n_init=1, max_iter=1, random_state=0).fit(
+        X, y, X_val=Xv, y_val=yv
+    )
+    short = TDLRegressor(n_init=1, max_iter=1, random_state=0).fit(
+        X[:1200], y[:1200], X_val=Xv, y_val=yv
+    )
+    assert long.output_lags_ == 8
+    n = short.order_selection_.n_states
+    assert 3 <= n < 8 and short.output_lags_ == n
+    assert SAMPLES_PER_WEIGHT * short._weights_at_order(n) <= 1200
+    assert SAMPLES_PER_WEIGHT * short._weights_at_order(n + 1) > 1200
+    assert short._weights_at_order(n) == len(short.coefs_)
+
+
+def test_grid_search_over_given_lags_beside_auto():
+    Xs, ys = zip(*(_fourth_order(800, seed) for seed in range(4)), strict=True)
+    search, score = _grid_scores(
+        _linear_tdl(early_stopping=False), "output_lags", [2, 8, "auto"], Xs, ys
+    )
+    assert score[2] < score[8] - 0.01
+    assert score["auto"] > search.best_score_ - 1e-3
+    assert search.best_estimator_.input_lags_ == 8
+
+
+def test_plot_order_selection_of_a_tdl():
+    X, y = _fourth_order(1500, 5)
+    model = _linear_tdl(max_iter=5).fit(X, y)
+    fig = plot_order_selection(model)
+    labels = [line.get_label() for line in fig.axes[1].get_lines()]
+    assert f"n_states {model.order_selection_.n_states}" in labels
+    plt.close(fig)
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+def test_auto_width_of_the_tdl_follows_its_lags():
+    X, y = _fourth_order(6500, 0)
+    model = TDLRegressor(hidden_layer_sizes="auto", n_init=1, max_iter=1)
+    model.fit(X, y)
+    # Three units per fed-back output value; the order's weights counted so.
+    assert model.output_lags_ == 8
+    assert model._sizes_.tolist() == [16, 24, 1]
+    assert model._weights_at_order(model.order_selection_.n_states) == len(model.coefs_)
+    few = model.set_params(output_lags=3, input_lags=3).fit(X, y)
+    assert few._sizes_.tolist() == [6, 9, 1]

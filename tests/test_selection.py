@@ -136,7 +136,7 @@ def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
     good = model.coefs_.copy()
     hidden, out = model._layout().layers
     w1, b1, w2 = hidden.weights, hidden.biases, out.weights
-    u_col = model.output_lags * model.n_outputs_  # first excitation lag
+    u_col = model.output_lags_ * model.n_outputs_  # first excitation lag
     good[w1] = 0.0
     good[w1.start + u_col] = 50.0 / np.abs(train.U).max()
     good[b1] = -100.0

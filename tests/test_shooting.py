@@ -32,7 +32,7 @@ def _objective(seg_len=40, alpha=0.0):
     train = est._stack([u], [y[:, None]])
     n_res = len(train.modelled)
     mask = est._penalty_mask()
-    obj = _FreeStateObjective(est, train, seg_len, mask, n_res, est.output_lags)
+    obj = _FreeStateObjective(est, train, seg_len, mask, n_res, est.output_lags_)
     theta = obj.start(est.coefs_)
     # Move the states off the measured values, so that nothing is zero.
     theta[obj.n_w :] += 0.05 * np.random.default_rng(1).standard_normal(

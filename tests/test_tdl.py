@@ -98,7 +98,7 @@ def _twin_network(model, w, z):
 
 def _twin_run(model, w, data, seg_len):
     """Recurrence with forward sensitivities, one sample at a time."""
-    na, nb, nk = model.output_lags, model.input_lags, model.input_delay
+    na, nb, nk = model.output_lags_, model.input_lags_, model.input_delay
     Y, U, h = data.Y, data.U, data.h
     n_out = Y.shape[1]
     Yhat = Y.copy()
@@ -513,7 +513,9 @@ def test_bad_input_messages():
     [
         TDLRegressor(
             output_lags=2, input_lags=2, hidden_layer_sizes=(3,), n_init=1, max_iter=5
-        )
+        ),
+        # The lags read from the data (the default).
+        TDLRegressor(hidden_layer_sizes=(3,), n_init=1, max_iter=5),
     ],
     expected_failed_checks=lambda est: ROW_ORDER_CHECKS,
 )
