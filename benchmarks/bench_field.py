@@ -36,7 +36,6 @@ downloaded there on first use.
 from __future__ import annotations
 
 import argparse
-import csv
 import os
 import platform
 import time
@@ -44,6 +43,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from _results import store_rows
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, KFold
 
@@ -212,30 +212,19 @@ def select_order(benchmark: str, data) -> list[str]:
     return [line]
 
 
-def _load_rows() -> list[dict]:
-    if not CSV.is_file():
-        return []
-    with CSV.open(newline="") as f:
-        return list(csv.DictReader(f))
-
-
 def _store(rows: list[dict]) -> None:
-    keep = {(r["benchmark"], r["model"]) for r in rows}
-    old = [r for r in _load_rows() if (r["benchmark"], r["model"]) not in keep]
     order = {name: i for i, name in enumerate(BENCHMARKS)}
     tests = {t: i for i, t in enumerate(t for _, t in PUBLISHED)}
-    merged = sorted(
-        [*old, *rows],
-        key=lambda r: (
+    merged = store_rows(
+        CSV,
+        FIELDS,
+        rows,
+        lambda r: (
             order.get(r["benchmark"], 99),
             tests.get(r["test"], 99),
             list(MODELS).index(r["model"]) if r["model"] in MODELS else 99,
         ),
     )
-    with CSV.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=FIELDS)
-        writer.writeheader()
-        writer.writerows(merged)
     _write_markdown(merged)
 
 

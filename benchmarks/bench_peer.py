@@ -47,7 +47,6 @@ environment.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import os
 import platform
@@ -59,6 +58,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+from _results import read_rows, store_rows
 
 HERE = Path(__file__).resolve().parent
 CSV = HERE / "results_peer.csv"
@@ -92,14 +92,6 @@ PEER_LABEL = "tsfast GRU-100"
 
 
 # --------------------------------------------------------------- the toolbox side
-def _read_csv(path: Path) -> list[dict]:
-    """Rows of a results file; none if it does not exist yet."""
-    if not path.is_file():
-        return []
-    with path.open(newline="") as f:
-        return list(csv.DictReader(f))
-
-
 def _split(benchmark: str, data_home: str | None):
     """Training, validation and test records of ``bench_field --validation split``."""
     from bench_field import BENCHMARKS
@@ -189,7 +181,7 @@ def read_ours(benchmark: str, model_names: list[str]) -> list[dict]:
     for path in (FIELD_SPLIT_CSV, FIELD_CSV):
         stored = [
             r
-            for r in _read_csv(path)
+            for r in read_rows(path)
             if r["benchmark"] == benchmark and r["model"] in model_names
         ]
         if stored:
@@ -333,11 +325,11 @@ def worker(npz: str, out: str, epochs: int, max_batches: int | None) -> None:
 # --------------------------------------------------------------- results
 def _store(rows: list[dict]) -> None:
     """Replace the stored rows of the same benchmark and model; rebuild the table."""
-    keep = {(r["benchmark"], r["model"]) for r in rows}
-    old = [r for r in _read_csv(CSV) if (r["benchmark"], r["model"]) not in keep]
-    merged = sorted(
-        [*old, *rows],
-        key=lambda r: (
+    merged = store_rows(
+        CSV,
+        FIELDS,
+        rows,
+        lambda r: (
             r["benchmark"],
             r["model"] != PEER_LABEL,
             int(r["epoch"] or 0),
@@ -345,10 +337,6 @@ def _store(rows: list[dict]) -> None:
             r["test"],
         ),
     )
-    with CSV.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=FIELDS)
-        writer.writeheader()
-        writer.writerows(merged)
     _write_markdown(merged)
 
 
