@@ -352,10 +352,9 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self.n_restarts_ = len(result.runs)
         self.best_restart_ = result.chosen
         self.selected_ = result.selected
+        lin = None if result.linear is None else result.linear.run
         self.linear_score_ = (
-            None
-            if result.linear is None
-            else (-result.linear.score if np.isfinite(result.linear.score) else -np.inf)
+            None if lin is None else (-lin.score if np.isfinite(lin.score) else -np.inf)
         )
         self.best_stage_ = chosen.best_stage
         self.training_history_ = [

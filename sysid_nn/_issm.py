@@ -702,7 +702,7 @@ default=None
 
     def _keep_training(self, result, val) -> None:
         super()._keep_training(result, val)
-        self._linear_restart = result.linear_start
+        self._linear_restart = 0 if result.linear is None else result.linear.k
 
     def _fit_one(self, train, val, restart, stop):
         if len(self._linear_starts) == 1:

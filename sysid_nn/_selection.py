@@ -125,6 +125,7 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
     if val is not None and val.skip == 0:
         val.burn, settled = burn_in(lin, run.w, val)
         seg = lin._final_segment()  # scored as the restarts are
+        loss = None
         if not settled and est._estimates_start():
             # The initial state is not forgotten within the record (an
             # integrating plant): where the linear model's run fits the rest
@@ -133,14 +134,15 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
             # need not: the hysteretic oscillator's linear models drift and
             # never forget their start either).
             window = min(_START_WINDOW, _burn_cap(val))
-            fitted = replace(val, start_window=window, burn=window)
-            at_rest = replace(val, burn=window)
-            gain = validation_loss(lin, run.w, fitted, seg) / max(
-                validation_loss(lin, run.w, at_rest, seg), np.finfo(float).tiny
+            fitted = validation_loss(
+                lin, run.w, replace(val, start_window=window, burn=window), seg
             )
-            if gain < _FITTED_START_GAIN:
+            at_rest = validation_loss(lin, run.w, replace(val, burn=window), seg)
+            if fitted < _FITTED_START_GAIN * max(at_rest, np.finfo(float).tiny):
                 val.start_window = val.burn = window
-        loss = validation_loss(lin, run.w, val, seg)
+                loss = fitted  # ``val`` as just scored
+        if loss is None:
+            loss = validation_loss(lin, run.w, val, seg)
         run = replace(run, score=loss, val_loss=loss)
     return LinearCandidate(run=run, w=embed_linear(est, run.w), k=k)
 

@@ -197,10 +197,9 @@ class Training:
     fit_time: float
     #: ``"restart"``, or ``"linear"`` when the linear model was returned.
     selected: str = "restart"
-    #: The linear model's run (None where it is no candidate).
-    linear: _Run | None = None
-    #: The restart whose linear start the linear model was trained from.
-    linear_start: int = 0
+    #: The linear model (None where it is no candidate): its run, and the
+    #: restart whose linear start it was trained from.
+    linear: _selection.LinearCandidate | None = None
     #: The chosen run (a restart's, or the linear model's).
     chosen_run: _Run | None = None
 
@@ -254,8 +253,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         used,
         time.perf_counter() - start,
         selected,
-        None if linear is None else linear.run,
-        0 if linear is None else linear.k,
+        linear,
         chosen,
     )
 
