@@ -51,7 +51,7 @@ from sysid_nn._order import select_order
 from sysid_nn._record_checks import trim_padding
 from sysid_nn._schedule import training_stages
 from sysid_nn._solvers import _Objective
-from sysid_nn._state_estimation import fit_initial_condition
+from sysid_nn._state_estimation import fit_initial_condition, rest_run_in
 from sysid_nn._training import _single_threaded_blas, fit_stages, train
 
 __all__ = ["DivergenceWarning"]
@@ -579,16 +579,39 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
                     f"estimates the {initial_name} from measured outputs."
                 )
             initial = self._estimate_initial(Xs, y_init, as_list, past)
+        Xs, leads = self._from_rest(Xs, initial is None and past is None)
         data = self._stack(Xs, None, initial, past)
         Yhat, J, diverged = self._free_run(data, initial, return_std)
-        self._warn_divergence(diverged, as_list)
-        y_sim = self._unstack(Yhat, data, as_list, self._y_1d)
+        self._warn_divergence(np.where(diverged >= 0, diverged - leads, -1), as_list)
+        y_sim = self._unstack(Yhat, data, True, self._y_1d)
+        y_sim = [y[k:] for y, k in zip(y_sim, leads, strict=True)]
         if not return_std:
-            return y_sim
-        std = _uncertainty.output_std(
-            self, Yhat, J, data, as_list, self._y_1d, interval
-        )
-        return y_sim, std
+            return y_sim if as_list else y_sim[0]
+        std = _uncertainty.output_std(self, Yhat, J, data, True, self._y_1d, interval)
+        std = [s[k:] for s, k in zip(std, leads, strict=True)]
+        return (y_sim, std) if as_list else (y_sim[0], std[0])
+
+    def _from_rest(self, Xs: list, at_rest: bool) -> tuple[list, np.ndarray]:
+        """The sequences preceded by the run-in that brings the model to rest.
+
+        Only when ``at_rest`` (no initial conditions given); see
+        :func:`~sysid_nn._state_estimation.rest_run_in`. Returns the
+        sequences and the run-in length of each.
+        """
+        if not at_rest:
+            return Xs, np.zeros(len(Xs), dtype=np.int64)
+
+        def free_run(runs):
+            data = self._stack(runs, None)
+            Yhat, _, diverged = self._free_run(data, None)
+            return [Yhat[a + data.h : b] for a, b in pairwise(data.starts)], diverged
+
+        leads = np.array(rest_run_in(free_run, Xs), dtype=np.int64)
+        Xs = [
+            np.concatenate([np.zeros((k, Xi.shape[1])), Xi])
+            for Xi, k in zip(Xs, leads, strict=True)
+        ]
+        return Xs, leads
 
     def _free_run(self, data: _Data, initial, want_jac: bool = False):
         """Free run of the fitted model from the initial conditions in ``data``.
@@ -683,8 +706,8 @@ default=None
             is returned: every value uses measurements up to ``t - horizon``
             (``horizon=1`` is the one-step predictor of the paper, section
             4.3). Without it nothing is measured and the free-run simulation
-            from zero initial conditions is returned (section 4.4); this is
-            what :meth:`score` and scikit-learn's model selection see.
+            from rest is returned (section 4.4; see :meth:`simulate`); this
+            is what :meth:`score` and scikit-learn's model selection see.
         horizon : int, default=1
             Prediction horizon in samples (only used with ``y``).
         return_std : bool, default=False
@@ -741,9 +764,9 @@ default=None
     def score(self, X, y, sample_weight=None):
         """Coefficient of determination R^2 of the free-run simulation.
 
-        The model is simulated from the excitation alone (zero initial
-        conditions) and compared with the measured response over all samples
-        of all sequences. A diverged simulation scores ``-inf``.
+        The model is simulated from the excitation alone (from rest, as
+        :meth:`simulate` does) and compared with the measured response over
+        all samples of all sequences. A diverged simulation scores ``-inf``.
 
         Parameters
         ----------

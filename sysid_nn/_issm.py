@@ -351,8 +351,13 @@ class ISSMRegressor(_RecurrentRegressorBase):
 default=None
             State just before the first sample: the measured outputs in the
             user's units, then the unmeasured states in the internal
-            coordinates (as returned by :meth:`predict_states`). Default:
-            zero outputs and the unmeasured states at rest, as in the paper.
+            coordinates (as returned by :meth:`predict_states`). Default: the
+            model at rest, the state its free run settles in under zero
+            excitation (the excitation assumed before the first sample), found
+            by running it over 8192 samples of zero excitation first; a model
+            that does not settle there (an integrating or self-oscillating
+            one) starts from zero outputs and unmeasured states, the paper's
+            start. ``np.zeros(n_states_)`` gives the paper's start always.
         initial_inputs : array-like of shape (n_past, n_inputs), or list of \
 such, default=None
             Measured excitation just before the first sample, oldest first
@@ -398,7 +403,9 @@ default=None
             Measured outputs.
         initial_state : array-like of shape (n_states,), or list of such, \
 default=None
-            State before the first sample, as for :meth:`simulate`.
+            State before the first sample, as for :meth:`simulate` (the
+            default starts the free run at rest; with ``y``, from zero
+            outputs and unmeasured states).
 
         Returns
         -------
@@ -411,9 +418,10 @@ default=None
             EKF transition and gain in the same units. Rows after a
             divergence are NaN.
         """
-        data, X0, as_list = self._prepare_call(X, y, initial_state)
+        data, X0, as_list, leads = self._prepare_call(X, y, initial_state)
         seg = 1 if y is not None else _FREE_RUN
         _, _, diverged, state = self._run_from(self.coefs_, data, seg, False, X0, True)
+        diverged = np.where(diverged >= 0, diverged - leads, -1)
         self._warn_divergence(diverged, as_list, stacklevel=3)
         Xs, D = state[0], state[3]
         n, p, m = self.n_states_, self.n_outputs_, self.n_features_in_
@@ -426,7 +434,7 @@ default=None
         K = D[:, :, n + m :] * scale[:, None] / self._y_scale[None, :]
         out = []
         for s, (a, b) in enumerate(pairwise(data.starts)):
-            rows = slice(a + data.h, b)
+            rows = slice(a + data.h + leads[s], b)
             bad = diverged[s]
             Phi_s, K_s = Phi[rows].copy(), K[rows].copy()
             if bad >= 0:
@@ -568,15 +576,19 @@ default=None
             X0[:, self.n_outputs_ :] = np.array([s[self.n_outputs_ :] for s in initial])
         return X0
 
-    def _prepare_call(self, X, y, initial, initial_inputs=None):
-        """Validate and stack a prediction call; returns ``(data, X0, as_list)``."""
+    def _prepare_call(self, X, y, initial):
+        """Validate and stack a state call; returns ``(data, X0, as_list, leads)``.
+
+        A free run (no ``y``) with no initial state starts at rest, after
+        the run-in of ``leads`` samples (see :meth:`_from_rest`).
+        """
         check_is_fitted(self, "coefs_")
         Xs, ys, as_list, _ = self._validate_Xy(X, y, reset=False, y_required=False)
         self._check_lengths(Xs, 1)
         initial = self._check_initial(initial, len(Xs), as_list, "initial_state")
-        past = self._check_initial_inputs(initial_inputs, len(Xs), as_list)
-        data = self._stack(Xs, ys, initial, past)
-        return data, self._initial_states(data, initial), as_list
+        Xs, leads = self._from_rest(Xs, ys is None and initial is None)
+        data = self._stack(Xs, ys, initial)
+        return data, self._initial_states(data, initial), as_list, leads
 
     # ------------------------------------------------------ starting point
     def _fit(self, X, y, *, X_val=None, y_val=None):

@@ -249,7 +249,13 @@ class TDLRegressor(_RecurrentRegressorBase):
 (n_lags,), or list of such, default=None
             Measured outputs just before the first sample, oldest first;
             ``n_lags`` is the fitted ``output_lags_``.
-            Default: zero initial conditions, as in the paper.
+            Default: the model at rest, the outputs its free run settles at
+            under zero excitation (the excitation assumed before the first
+            sample), found by running it over 8192 samples of zero
+            excitation first; a model that does not settle there (an
+            integrating or self-oscillating one) starts from zero outputs, as
+            in the paper. ``np.zeros((output_lags_, n_outputs))`` gives the
+            paper's start always.
         initial_inputs : array-like of shape (n_past, n_inputs), or list of \
 such, default=None
             Measured excitation just before the first sample, oldest first

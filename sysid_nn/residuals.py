@@ -305,7 +305,7 @@ def analyze_residuals(
         Significance level.
     skip : int, default=0
         Samples dropped from the start of every sequence before testing
-        (start-up transient of zero initial conditions).
+        (start-up transient of a record that does not start at rest).
     include_zero_lag : bool, default=True
         Passed to :func:`cross_correlation_test`.
     nonlinear : bool, default=True

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 from sklearn.exceptions import ConvergenceWarning
+from sklearn.metrics import r2_score
 from sklearn.model_selection import GridSearchCV, PredefinedSplit
 
 from sysid_nn import (
@@ -27,6 +28,7 @@ from sysid_nn import (
     ISSMRegressor,
     TDLRegressor,
 )
+from sysid_nn._state_estimation import _RUN_IN, rest_run_in
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "sysid_nn"
 
@@ -382,6 +384,65 @@ def test_a_failed_initial_state_fit_warns(monkeypatch):
     monkeypatch.setattr(optimize, "least_squares", failing)
     with pytest.warns(ConvergenceWarning, match="gave up"):
         model.simulate(X[0], y_init=y[0][:20])
+
+
+# ------------------------------------------------------- free runs at rest
+@pytest.mark.parametrize(
+    "model, zero",
+    [
+        (
+            TDLRegressor(hidden_layer_sizes=(), n_init=1, random_state=0),
+            lambda m: {"initial_outputs": np.zeros((m.output_lags_, 1))},
+        ),
+        (
+            ISSMRegressor(
+                n_states=2, hidden_layer_sizes=(3,), n_init=1, random_state=0
+            ),
+            lambda m: {"initial_state": np.zeros(m.n_states_)},
+        ),
+    ],
+)
+def test_a_record_at_rest_is_simulated_from_the_models_rest(model, zero):
+    # The records sit at an offset: at rest the output is 1, not 0, so the
+    # zero start is away from the model's rest by the offset.
+    X, y = _arx_records(3, length=300)
+    y = [yi + 1.0 for yi in y]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(X[:2], y[:2])
+    at_rest = model.simulate(X[2])
+    from_zero = model.simulate(X[2], **zero(model))
+    start = slice(0, 20)
+    assert np.max(np.abs(at_rest - y[2])[start]) < 0.05
+    assert np.max(np.abs(from_zero - y[2])[start]) > 0.2
+    # Under no excitation a model at rest stays there.
+    quiet = model.simulate(np.zeros((100, 1)))
+    np.testing.assert_allclose(quiet, quiet[-1], atol=1e-6)
+    np.testing.assert_allclose(quiet[-1], 1.0, atol=0.05)
+    # The rest is the end of a run-in over zero excitation from zero.
+    lead = np.zeros((_RUN_IN, 1))
+    run = model.simulate(np.vstack([lead, X[2]]), **zero(model))
+    np.testing.assert_allclose(at_rest, run[_RUN_IN:])
+    # Every free run starts there: the model's score and, for the ISSM,
+    # its states without measured outputs.
+    assert model.score(X[2], y[2]) == pytest.approx(r2_score(y[2], at_rest))
+    if isinstance(model, ISSMRegressor):
+        states = model.predict_states(X[2]).states
+        np.testing.assert_allclose(states[:, 0], at_rest)
+
+
+def test_a_model_that_does_not_settle_starts_from_zero():
+    settled = np.ones((_RUN_IN, 1))
+    drifting = np.linspace(0.0, 1.0, _RUN_IN)[:, None]
+    runs = [settled, drifting, settled]
+
+    def free_run(inputs):
+        assert all(np.all(u == 0.0) for u in inputs)  # zero excitation
+        return runs, np.array([-1, -1, 10])
+
+    leads = rest_run_in(free_run, [np.ones((5, 1))] * 3)
+    # Settled; still moving (an integrator); diverged: the zero start.
+    assert leads == [_RUN_IN, 0, 0]
 
 
 # ------------------------------------------------------ observable weights
