@@ -38,7 +38,9 @@ same split; wall-clock fit times), or ``results_field.csv`` where that has no
 rows for the benchmark (the estimators' own held-out tail), or, with
 ``--ours run``, from fits run here on one pinned core with their CPU time
 (``--models`` chooses which, among those of ``bench_field.py``). Every row is stored in
-``results_peer.csv`` and ``results_peer.md`` is rebuilt from all stored rows.
+``results_peer.csv`` and ``results_peer.md`` is rebuilt from all stored rows;
+without ``--peer-python`` only the toolbox's rows are refreshed (from the
+field results with ``--ours csv``), the peer's stored rows are kept.
 The full recipe takes about 16-20 CPU-minutes per benchmark on this kind of
 machine. ``benchmarks/run.py`` does not run this script: it needs the peer's
 environment.
@@ -425,8 +427,10 @@ def main(argv: list[str] | None = None) -> None:
     unknown = set(benchmarks) - set(UNITS)
     if unknown:
         parser.error(f"unknown benchmark: {', '.join(sorted(unknown))}")
-    if not args.peer_python and args.ours != "run":
-        parser.error("--peer-python is required (the interpreter with tsfast)")
+    if not args.peer_python and args.ours == "none":
+        parser.error(
+            "--peer-python (the interpreter with tsfast) is required with --ours none"
+        )
     sys.path.insert(0, str(HERE))  # bench_field's loaders and models
     models = [m for m in args.models.split(",") if m]
     with tempfile.TemporaryDirectory(prefix="bench-peer-") as tmp:

@@ -271,6 +271,8 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             # The chosen lags reach further back than the provisional ones.
             train_data, val = self._stack_fit_records(Xs, ys, Xv, yv, skip)
         self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train_data.Y).max())
+        modelled = train_data.Y[train_data.modelled]
+        self._y_range = (modelled.min(axis=0), modelled.max(axis=0))
         self._diagnose(train_data)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
         with _single_threaded_blas():
@@ -598,7 +600,8 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         :func:`~sysid_nn._state_estimation.rest_run_in`. Returns the
         sequences and the run-in length of each.
         """
-        if not at_rest:
+        if not at_rest or not hasattr(self, "_y_range"):
+            # (Models fitted before the range was kept start from zero.)
             return Xs, np.zeros(len(Xs), dtype=np.int64)
 
         def free_run(runs):
@@ -606,7 +609,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             Yhat, _, diverged = self._free_run(data, None)
             return [Yhat[a + data.h : b] for a, b in pairwise(data.starts)], diverged
 
-        leads = np.array(rest_run_in(free_run, Xs), dtype=np.int64)
+        leads = np.array(rest_run_in(free_run, Xs, self._y_range), dtype=np.int64)
         Xs = [
             np.concatenate([np.zeros((k, Xi.shape[1])), Xi])
             for Xi, k in zip(Xs, leads, strict=True)

@@ -194,7 +194,7 @@ _SETTLED_TAIL = 2048
 _SETTLED_TOL = 1e-6
 
 
-def rest_run_in(free_run, Xs: list) -> list[int]:
+def rest_run_in(free_run, Xs: list, y_range) -> list[int]:
     """Length of the run-in that brings a fitted model to rest, per sequence.
 
     A network's zero state is not its rest: its maps have biases, so a free
@@ -204,12 +204,17 @@ def rest_run_in(free_run, Xs: list) -> list[int]:
     settles under zero excitation, the excitation the free run assumes
     before the first sample; each sequence is simulated after ``_RUN_IN``
     samples of it. Where the output still moves over the run-in's last
-    ``_SETTLED_TAIL`` samples (an integrating or self-oscillating model) or
-    diverged, the run starts from zero as before (run-in 0).
+    ``_SETTLED_TAIL`` samples (an integrating or self-oscillating model),
+    diverged, or settled outside ``y_range``, the range of the training
+    outputs (zero excitation outside the training excitation, whose rest
+    the model extrapolates: on Cascaded Tanks the linear model's rest is
+    -6 V, the training outputs span 2.9-10 V), the run starts from zero as
+    before (run-in 0).
 
     ``free_run(Xs)`` returns the standardised free-run outputs of each
     sequence from the zero initial conditions, and the divergence index of
-    each (-1: none).
+    each (-1: none); ``y_range`` is ``(lowest, highest)`` standardised
+    training output, per output.
     """
     runs = [np.zeros((_RUN_IN, np.shape(Xi)[1])) for Xi in Xs]
     outputs, diverged = free_run(runs)
@@ -217,5 +222,6 @@ def rest_run_in(free_run, Xs: list) -> list[int]:
     for Y, bad in zip(outputs, diverged, strict=True):
         tail = Y[-_SETTLED_TAIL:]
         settled = bad < 0 and np.all(np.abs(tail - tail[-1]) <= _SETTLED_TOL)
-        leads.append(_RUN_IN if settled else 0)
+        inside = np.all((y_range[0] <= tail[-1]) & (tail[-1] <= y_range[1]))
+        leads.append(_RUN_IN if settled and inside else 0)
     return leads

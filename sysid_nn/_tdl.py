@@ -253,8 +253,8 @@ class TDLRegressor(_RecurrentRegressorBase):
             under zero excitation (the excitation assumed before the first
             sample), found by running it over 8192 samples of zero
             excitation first; a model that does not settle there (an
-            integrating or self-oscillating one) starts from zero outputs, as
-            in the paper. ``np.zeros((output_lags_, n_outputs))`` gives the
+            integrating or self-oscillating one) or settles outside the range
+            of the training outputs starts from zero outputs, as in the paper. ``np.zeros((output_lags_, n_outputs))`` gives the
             paper's start always.
         initial_inputs : array-like of shape (n_past, n_inputs), or list of \
 such, default=None

@@ -431,18 +431,19 @@ def test_a_record_at_rest_is_simulated_from_the_models_rest(model, zero):
         np.testing.assert_allclose(states[:, 0], at_rest)
 
 
-def test_a_model_that_does_not_settle_starts_from_zero():
+def test_a_model_that_does_not_settle_in_range_starts_from_zero():
     settled = np.ones((_RUN_IN, 1))
     drifting = np.linspace(0.0, 1.0, _RUN_IN)[:, None]
-    runs = [settled, drifting, settled]
+    runs = [settled, drifting, settled, 3.0 * settled]
 
     def free_run(inputs):
         assert all(np.all(u == 0.0) for u in inputs)  # zero excitation
-        return runs, np.array([-1, -1, 10])
+        return runs, np.array([-1, -1, 10, -1])
 
-    leads = rest_run_in(free_run, [np.ones((5, 1))] * 3)
-    # Settled; still moving (an integrator); diverged: the zero start.
-    assert leads == [_RUN_IN, 0, 0]
+    leads = rest_run_in(free_run, [np.ones((5, 1))] * 4, (-2.0, 2.0))
+    # Settled; still moving (an integrator); diverged; settled outside the
+    # training outputs' range: the zero start for all but the first.
+    assert leads == [_RUN_IN, 0, 0, 0]
 
 
 # ------------------------------------------------------ observable weights
