@@ -357,7 +357,8 @@ default=None
             by running it over 8192 samples of zero excitation first; a model
             that does not settle there (an integrating or self-oscillating
             one) or settles outside the range of the training outputs starts
-            from zero outputs and unmeasured states, the paper's start. ``np.zeros(n_states_)`` gives the paper's start always.
+            from zero outputs and unmeasured states, the paper's start.
+            ``np.zeros(n_states_)`` gives the paper's start always.
         initial_inputs : array-like of shape (n_past, n_inputs), or list of \
 such, default=None
             Measured excitation just before the first sample, oldest first

@@ -254,8 +254,9 @@ class TDLRegressor(_RecurrentRegressorBase):
             sample), found by running it over 8192 samples of zero
             excitation first; a model that does not settle there (an
             integrating or self-oscillating one) or settles outside the range
-            of the training outputs starts from zero outputs, as in the paper. ``np.zeros((output_lags_, n_outputs))`` gives the
-            paper's start always.
+            of the training outputs starts from zero outputs, as in the paper.
+            ``np.zeros((output_lags_, n_outputs))`` gives the paper's start
+            always.
         initial_inputs : array-like of shape (n_past, n_inputs), or list of \
 such, default=None
             Measured excitation just before the first sample, oldest first
