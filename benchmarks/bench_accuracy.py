@@ -5,7 +5,7 @@ protocols of ``_protocol.py`` (P1: one training record of typical amplitude,
 P5: five; two validation records; the same 25 unseen test records) at
 dt = 0.01 s and dt = 0.03 s, and scores on the test records:
 
-* free-run NRMSE from zero initial conditions (``simulate(X)``): mean,
+* free-run NRMSE from rest (``simulate(X)``, the model at its own rest): mean,
   median, worst; the number of divergent runs (NaN output);
 * free-run NRMSE started at t = 2 s (sample 200 at dt = 0.01) from the
   measured outputs (TDL: ``initial_outputs``; ISSM: ``initial_state`` with the
@@ -119,7 +119,8 @@ the parameters named in the row.
 Scores are NRMSE (RMS error / std of the measured signal) per test record,
 displacement only:
 
-- free run from zero initial conditions (mean, median, worst; `div` = divergent
+- free run from rest (`simulate(X)`: the model at its own rest under zero
+  excitation; mean, median, worst; `div` = divergent
   runs, scored as infinite); ratio = its median / the linear model's median;
 - free run started at t0 = 2 s from measured outputs, scored from t0 (TDL:
   `initial_outputs` = the measured outputs before t0; ISSM: `initial_state` = the
@@ -135,7 +136,7 @@ displacement only:
   initial state estimated from the measured outputs over the first
   {t_window:g} s (`simulate(X[k0:], y_init=y[k0:k0 + k])`, the
   state-initialisation window), scored after the window ("estimated start");
-- the zero-initial free run with both signals zero-phase high-passed above 0.3 Hz
+- the free run from rest with both signals zero-phase high-passed above 0.3 Hz
   (4th-order Butterworth, `filtfilt`): the oscillatory part without the drift;
 - k-step prediction medians (`predict(X, y, horizon=k)`);
 - percentage of test records whose one-step residuals pass the whiteness test

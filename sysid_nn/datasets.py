@@ -9,7 +9,9 @@ Every function returns the package's data conventions: lists of experiments,
 each ``X`` of shape ``(n_samples, 1)`` and ``y`` of shape ``(n_samples,)``,
 the sampling time ``dt`` and ``n_skip``, the number of initial samples of each
 test sequence that scoring leaves out (the benchmark's state-initialisation
-window; the community scores a free run from rest on the samples after it).
+window: the community scores a free run on the samples after it, whose
+initial state may be estimated from the window's measured outputs, as
+``simulate(X, y_init=y[:n_skip])`` does).
 The train/test splits are the ones of the community's loader,
 ``nonlinear-benchmarks`` 1.0.1, which the ``fetch_*`` functions call to
 download and read the files: install it with ``pip install
