@@ -45,7 +45,12 @@ from sysid_nn._data import (
 )
 from sysid_nn._diagnosis import RecordDiagnosis, diagnose_records, warn_white_misfit
 from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._exceptions import DivergenceWarning, check_version, version_stamp
+from sysid_nn._exceptions import (
+    DivergenceWarning,
+    check_version,
+    user_stacklevel,
+    version_stamp,
+)
 from sysid_nn._layout import MLPLayout
 from sysid_nn._order import select_order
 from sysid_nn._record_checks import trim_padding
@@ -292,7 +297,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
                 "started at, so its loss was not finite. The weights come from "
                 "the stages before (skipped_stages_).",
                 ConvergenceWarning,
-                stacklevel=3,
+                stacklevel=user_stacklevel(),
             )
         if not chosen.converged:
             warnings.warn(
@@ -300,7 +305,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
                 "iterations of its last training stage before reaching tol="
                 f"{self.tol}. Increase max_iter or loosen tol.",
                 ConvergenceWarning,
-                stacklevel=3,
+                stacklevel=user_stacklevel(),
             )
         return self
 
@@ -691,7 +696,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
                     f"({message}); the simulation starts from the best state "
                     "found. Check the window for outliers, or lengthen it.",
                     ConvergenceWarning,
-                    stacklevel=4,
+                    stacklevel=user_stacklevel(),
                 )
             out.append(offset + scale * v.reshape(offset.shape))
         return out
@@ -802,11 +807,7 @@ default=None
         raise NotImplementedError  # pragma: no cover - abstract
 
     def _warn_divergence(
-        self,
-        diverged: np.ndarray,
-        as_list: bool,
-        what: str = "free run",
-        stacklevel: int = 4,
+        self, diverged: np.ndarray, as_list: bool, what: str = "free run"
     ) -> None:
         for s, t in enumerate(diverged):
             if t >= 0:
@@ -816,7 +817,7 @@ default=None
                     f"{t}: its output left {_DIVERGENCE_FACTOR:g} times the training "
                     "range. Values from there on are NaN.",
                     DivergenceWarning,
-                    stacklevel=stacklevel,
+                    stacklevel=user_stacklevel(),
                 )
 
     def _mark_out_of_range(self, Yhat, data: _Data, as_list: bool, what: str):

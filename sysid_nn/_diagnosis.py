@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sysid_nn._data import _Data
+from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._record_checks import check_sampling
 from sysid_nn._state_estimation import (
     _FULL_BAND,
@@ -152,5 +153,5 @@ def warn_white_misfit(est, diagnosis: RecordDiagnosis, advice: str) -> None:
             else ""
         ),
         UserWarning,
-        stacklevel=5,
+        stacklevel=user_stacklevel(),
     )

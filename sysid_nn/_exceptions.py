@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import inspect
 import warnings
+from pathlib import Path
 
 __all__ = ["DivergenceWarning", "InconsistentVersionWarning"]
 
@@ -75,10 +77,35 @@ def version_stamp() -> str:
     return __version__
 
 
-def check_version(saved, what: str, stacklevel: int = 3) -> None:
+def check_version(saved, what: str) -> None:
     """Warn :class:`InconsistentVersionWarning` when ``saved`` is not ours."""
     current = version_stamp()
     if saved != current:
         warnings.warn(
-            InconsistentVersionWarning(what, saved, current), stacklevel=stacklevel
+            InconsistentVersionWarning(what, saved, current),
+            stacklevel=user_stacklevel(),
         )
+
+
+#: The package's folder: frames of files below it are the package's own.
+_PACKAGE = str(Path(__file__).resolve().parent)
+
+
+def user_stacklevel() -> int:
+    """``stacklevel`` for :func:`warnings.warn` that names the user's line.
+
+    The number of frames from the function that warns to the first one
+    outside the package (the caller of ``fit``, ``simulate``, ...), however
+    deep the warning is raised: one estimator may fit another (the ISSM's
+    TDL start), so a fixed count points into the package. Call it as the
+    argument of ``warnings.warn``.
+    """
+    frame = inspect.currentframe()
+    level = 0
+    try:
+        while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE):
+            frame = frame.f_back
+            level += 1
+    finally:
+        del frame
+    return level

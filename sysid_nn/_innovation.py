@@ -13,6 +13,7 @@ import warnings
 import numpy as np
 
 from sysid_nn._data import _Data
+from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._solvers import _Objective, _solve_lm
 
 #: Solver iterations spent refitting the innovation weights after a
@@ -91,7 +92,7 @@ def stabilise_predictor(est, train: _Data, val: _Data | None) -> None:
             "predictions may drift from the measurements; use "
             'focus="prediction", linear_part=True or more training data.',
             UnstablePredictorWarning,
-            stacklevel=4,
+            stacklevel=user_stacklevel(),
         )
 
 

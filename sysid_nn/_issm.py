@@ -423,7 +423,7 @@ default=None
         seg = 1 if y is not None else _FREE_RUN
         _, _, diverged, state = self._run_from(self.coefs_, data, seg, False, X0, True)
         diverged = np.where(diverged >= 0, diverged - leads, -1)
-        self._warn_divergence(diverged, as_list, stacklevel=3)
+        self._warn_divergence(diverged, as_list)
         Xs, D = state[0], state[3]
         n, p, m = self.n_states_, self.n_outputs_, self.n_features_in_
         scale = np.ones(n)

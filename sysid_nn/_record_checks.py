@@ -25,6 +25,8 @@ import warnings
 import numpy as np
 from scipy.signal import welch
 
+from sysid_nn._exceptions import user_stacklevel
+
 #: Samples per fundamental period up to which the defaults were measured to
 #: handle clean records of the hysteretic oscillator (benchmarks/
 #: bench_records.py: both networks from 20 to 200; at 400 the TDL still, the
@@ -72,7 +74,7 @@ def trim_padding(Xs: list, ys: list, min_len: int, what: str) -> tuple[list, lis
             "left out of training. Models are fitted to the rest; cut the "
             "padding off yourself to silence this warning.",
             UserWarning,
-            stacklevel=4,
+            stacklevel=user_stacklevel(),
         )
     return Xs, ys
 
@@ -185,6 +187,6 @@ def check_sampling(name: str, Y: np.ndarray, segments) -> tuple[float, str]:
             f"differences between samples. {todo} See the user guide's "
             "pitfalls page on measured records.",
             UserWarning,
-            stacklevel=4,
+            stacklevel=user_stacklevel(),
         )
     return spp, advice

@@ -20,7 +20,7 @@ def _read_bundle(path: str | os.PathLike) -> Any:
         raise ValueError(f"cannot read {path} as a saved model: {exc}") from None
     if not (hasattr(bundle, "get") and bundle.get("model") is not None):
         raise ValueError(f"{path} was not written by `sysid-nn fit --save`.")
-    check_version(bundle.get("sysid_nn_version"), str(path), stacklevel=3)
+    check_version(bundle.get("sysid_nn_version"), str(path))
     return bundle
 
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from sysid_nn._data import _FREE_RUN
+from sysid_nn._exceptions import user_stacklevel
 
 #: A validation record simulated from rest is scored after the linear
 #: model's response to its initial state has fallen below this share of
@@ -299,6 +300,6 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
         + ". It is returned (selected_ = 'linear'). More or longer records, a "
         "larger n_init or another structure may help.",
         UserWarning,
-        stacklevel=6,
+        stacklevel=user_stacklevel(),
     )
     return replace(lin, w=linear.w), "linear"

@@ -35,7 +35,7 @@ from sklearn.utils import check_random_state
 
 from sysid_nn import _progress, _selection
 from sysid_nn._data import _FREE_RUN, _Data
-from sysid_nn._exceptions import DivergenceWarning
+from sysid_nn._exceptions import DivergenceWarning, user_stacklevel
 from sysid_nn._progress import report_stage
 from sysid_nn._schedule import HALVING_AFTER, stage_data, survivors
 from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
@@ -297,7 +297,7 @@ def fallback(est, w: np.ndarray, train_data: _Data, val: _Data | None):
         + " Check the records for outliers, zero-padded or clipped stretches, "
         "and records of very different amplitude.",
         DivergenceWarning,
-        stacklevel=5,
+        stacklevel=user_stacklevel(),
     )
     return (start, "linear_start") if finite else (w, "none")
 

@@ -27,6 +27,7 @@ from itertools import pairwise
 
 import numpy as np
 
+from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._kernels._propagation import row_variances
 
 #: Eigenvalues of the normal matrix (scaled to a unit diagonal) below this
@@ -126,7 +127,7 @@ def _accumulated_normal(est, w, data, seg) -> _Normal | None:
         "residuals are autocorrelated (a free run's usually are); check them "
         "with sysid_nn.uncertainty.ensemble_std.",
         UserWarning,
-        stacklevel=5,
+        stacklevel=user_stacklevel(),
     )
     return _Normal(
         JtJ=JtJ,
@@ -254,7 +255,7 @@ def fit_covariance(est, train) -> None:
             "free run leaves the training range on its own records is not "
             "trustworthy; see the DivergenceWarning of its simulations.",
             UserWarning,
-            stacklevel=5,
+            stacklevel=user_stacklevel(),
         )
         est.coefs_covariance_ = np.full((n_w, n_w), np.nan)
         est.n_effective_params_ = np.nan
@@ -280,7 +281,7 @@ def fit_covariance(est, train) -> None:
             "which linearise the outputs in the weights, are unreliable. Check "
             "them with sysid_nn.uncertainty.ensemble_std.",
             UserWarning,
-            stacklevel=4,
+            stacklevel=user_stacklevel(),
         )
     innovations = getattr(est, "_innovation_index", None)
     if innovations is not None and est._final_segment() != 1 and one is not None:

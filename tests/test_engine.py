@@ -386,6 +386,22 @@ def test_a_failed_initial_state_fit_warns(monkeypatch):
         model.simulate(X[0], y_init=y[0][:20])
 
 
+def test_warnings_name_the_line_that_called_the_package():
+    # Warnings are raised at different depths below fit and simulate (and
+    # the ISSM's TDL start is an estimator fitted inside another); each
+    # must name the user's line.
+    X, y = _arx_records(2)
+    model = ISSMRegressor(hidden_layer_sizes=(3,), n_init=1, max_iter=1, random_state=0)
+    linear = TDLRegressor(hidden_layer_sizes=(), n_init=1, random_state=0)
+    with warnings.catch_warnings(record=True) as record:
+        warnings.simplefilter("always")
+        model.fit(X, y)
+        linear.fit(X, y).simulate(X[0] * 1e6)
+    kinds = {w.category for w in record}
+    assert {ConvergenceWarning, DivergenceWarning} <= kinds
+    assert {w.filename for w in record} == {__file__}
+
+
 # ------------------------------------------------------- free runs at rest
 @pytest.mark.parametrize(
     "model, zero",
