@@ -41,8 +41,6 @@ class _Data:
     U: np.ndarray
     starts: np.ndarray
     h: int
-    #: Leading modelled rows left out of a validation score (see ``scored``).
-    skip: int = 0
     #: Leading modelled rows of every sequence left out of it too (a burn-in).
     burn: int = 0
     #: Modelled rows at the start of every sequence its initial state is
@@ -66,7 +64,7 @@ class _Data:
     def scored(self) -> np.ndarray:
         """Modelled rows that count in a validation score."""
         rows = [np.arange(a + self.h + self.burn, b) for a, b in pairwise(self.starts)]
-        return np.concatenate(rows)[self.skip :]
+        return np.concatenate(rows)
 
 
 def is_sequence_list(data) -> bool:

@@ -35,7 +35,8 @@ early_stopping : bool, default=True
 validation_fraction : float, default=0.2
     Share of the sequences held out when ``early_stopping`` is on and no
     ``X_val`` is given; with one or two sequences, the share of the last
-    one's tail, scored within a free run over its whole record.
+    one's tail, held out as a validation record of its own (judged as one
+    passed as ``X_val``).
 n_iter_no_change : int, default=10
     Patience of early stopping, in accepted steps.
 random_state : int, RandomState instance or None, default=None

@@ -43,8 +43,6 @@ own weights. Both estimators take the rule through
 
 from __future__ import annotations
 
-from itertools import pairwise
-
 import numpy as np
 from sklearn.utils import Bunch
 
@@ -188,8 +186,7 @@ def _n_weights(est, n: int) -> int:
 def _score(est, lin: Bunch, data) -> float:
     """Validation free-run NRMSE of a subspace model, from rest.
 
-    ``data`` are standardised stacked records; a validation tail
-    (``data.skip``) counts only after its training part.
+    ``data`` are standardised stacked records.
     """
     n = lin.A.shape[0]
     if np.abs(np.linalg.eigvals(lin.A)).max() >= 1.0:
@@ -197,16 +194,12 @@ def _score(est, lin: Bunch, data) -> float:
     Y, U = subspace_records(est, data)
     u_rest = -est._x_mean / est._x_scale
     x_rest = np.linalg.lstsq(np.eye(n) - lin.A, lin.B @ u_rest + lin.c, rcond=None)[0]
-    lead = max(0, est.input_delay - 1)  # modelled rows subspace_records drops
     errors, targets = [], []
-    skip = data.skip
-    for y, u, (a, b) in zip(Y, U, pairwise(data.starts), strict=True):
+    for y, u in zip(Y, U, strict=True):
         Yhat = np.empty_like(y)
         linear_free_run(lin.A, lin.B, lin.C, lin.c, u, x_rest, Yhat)
-        first = max(0, skip - lead)
-        errors.append(Yhat[first:] - y[first:])
-        targets.append(y[first:])
-        skip = max(0, skip - (b - a - data.h))
+        errors.append(Yhat - y)
+        targets.append(y)
     e, t = np.concatenate(errors), np.concatenate(targets)
     if not np.all(np.isfinite(e)):
         return np.inf

@@ -138,7 +138,7 @@ def stage_data(data: _Data, seg: int, rng: np.random.RandomState) -> _Data:
     rows = np.concatenate([np.arange(t - h, e) for t, e in picked])
     starts = np.concatenate([[0], np.cumsum(picked[:, 1] - picked[:, 0] + h)])
     return dataclasses.replace(
-        data, Y=data.Y[rows], U=data.U[rows], starts=starts.astype(np.int64), skip=0
+        data, Y=data.Y[rows], U=data.U[rows], starts=starts.astype(np.int64)
     )
 
 

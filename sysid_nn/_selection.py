@@ -107,11 +107,10 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
     subspace start diverged on validation while the one from the ARX start
     stayed bounded), as the fresh restart ``new_restart(k)`` (a
     :class:`~sysid_nn._training._Restart`); the better one by its score is
-    the candidate. A validation record simulated from rest
-    (``val.skip == 0``) is then scored after :func:`burn_in` samples, so
-    that a separate validation record and the tail of the training record
-    judge alike. Returns None for estimators without a linear candidate
-    (see :func:`has_linear_candidate`).
+    the candidate. Validation records, simulated from rest, are then
+    scored after :func:`burn_in` samples (or from fitted starts, below).
+    Returns None for estimators without a linear candidate (see
+    :func:`has_linear_candidate`).
     """
     if not has_linear_candidate(est):
         return None
@@ -123,7 +122,7 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
         for k in lin._linear_start_restarts()
     ]
     run, k = min(fits, key=lambda fit: fit[0].score)  # the first of equals
-    if val is not None and val.skip == 0:
+    if val is not None:
         val.burn, settled = burn_in(lin, run.w, val)
         seg = lin._final_segment()  # scored as the restarts are
         loss = None

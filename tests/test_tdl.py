@@ -545,17 +545,21 @@ def test_quasi_newton_solvers_keep_iterating_from_the_arx_start(solver):
     assert net.loss_ < 0.9 * start.loss_
 
 
-def test_tail_block_validation_scores_only_the_held_out_tail():
+def test_tail_block_is_held_out_as_a_record_of_its_own():
     Xs, ys = _records(n=1, length=300)
     model = _small(validation_fraction=0.2)
     model.n_outputs_ = 1
-    head, yhead, val, yval, skip = model._split_validation(Xs, [ys[0]], 5)
-    assert len(head[0]) == len(yhead[0]) == 240 and skip == 240
-    assert len(val[0]) == len(yval[0]) == 300
-    # The validation free run covers the whole record from rest.
-    np.testing.assert_array_equal(val[0], Xs[0])
+    head, yhead, val, yval = model._split_validation(Xs, [ys[0]], 5)
+    assert len(head[0]) == len(yhead[0]) == 240
+    # The last fifth alone, judged as a record passed as X_val.
+    np.testing.assert_array_equal(val[0], Xs[0][240:])
+    np.testing.assert_array_equal(yval[0], ys[0][240:])
     fitted = _small(validation_fraction=0.2, max_iter=20).fit(Xs[0], ys[0])
-    assert fitted.best_validation_score_ is not None
+    passed = _small(max_iter=20).fit(
+        Xs[0][:240], ys[0][:240], X_val=Xs[0][240:], y_val=ys[0][240:]
+    )
+    np.testing.assert_array_equal(fitted.coefs_, passed.coefs_)
+    assert fitted.best_validation_score_ == passed.best_validation_score_
 
 
 def test_last_stage_gets_its_own_patience():
