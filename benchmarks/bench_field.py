@@ -137,8 +137,8 @@ def _fit(model, data, validation: str):
     """Fit on the training record; ``"split"`` validates on its last fifth alone.
 
     ``"tail"`` is the estimators' default for one record: the last fifth is
-    held out but judged within a free run over the whole record. ``"split"``
-    passes it as ``X_val``, a separate experiment simulated from rest.
+    held out as a validation record of its own (judged as one passed as
+    ``X_val``, so both give the same fit). ``"split"`` passes it as ``X_val``.
     """
     if validation == "tail":
         return model.fit(data.X_train, data.y_train)
@@ -260,7 +260,7 @@ def _write_markdown(rows: list[dict]) -> None:
     held_out = (
         "passed as a separate validation record (`X_val`, simulated from rest)"
         if MD == SPLIT_MD
-        else "held out for validation within the record (the estimators' default)"
+        else "held out by the estimators as a validation record of its own"
     )
     lines = [
         "# The toolbox on the community's benchmarks",
