@@ -120,10 +120,10 @@ selected_ : {"restart", "linear"}
     linear model) beat it, with a warning. A model without hidden layers
     is its restarts' best.
 validation_burn_in_ : int or None
-    Leading samples of every validation record simulated from rest left
-    out of the validation score (the burn-in, or the window below); 0
-    for records that start at rest or are the tail of a training record;
-    None without validation records.
+    Leading samples of every validation record (passed as ``X_val`` or
+    held out) simulated from rest left out of the validation score (the
+    burn-in, or the window below); 0 for records that start at rest; None
+    without validation records.
 validation_start_window_ : int or None
     Where a validation record's initial state is not forgotten within
     half of it (an integrating plant) and fitting it to the record's first
