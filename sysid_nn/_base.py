@@ -56,7 +56,7 @@ from sysid_nn._order import select_order
 from sysid_nn._record_checks import trim_padding
 from sysid_nn._schedule import training_stages
 from sysid_nn._solvers import _Objective
-from sysid_nn._state_estimation import fit_initial_condition, rest_run_in
+from sysid_nn._state_estimation import _RUN_IN, fit_initial_condition, rest_output
 from sysid_nn._training import _single_threaded_blas, fit_stages, train
 
 __all__ = ["DivergenceWarning"]
@@ -275,8 +275,6 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             # The chosen lags reach further back than the provisional ones.
             train_data, val = self._stack_fit_records(Xs, ys, Xv, yv)
         self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train_data.Y).max())
-        modelled = train_data.Y[train_data.modelled]
-        self._y_range = (modelled.min(axis=0), modelled.max(axis=0))
         self._diagnose(train_data)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
         with _single_threaded_blas():
@@ -285,6 +283,9 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             self._keep_training(result, val)
             self._after_fit(train_data, val)
             _uncertainty.fit_covariance(self, train_data)
+            modelled = train_data.Y[train_data.modelled]
+            self._y_range = (modelled.min(axis=0), modelled.max(axis=0))
+            self.rest_output_ = self._rest_output()
         self._sysid_nn_version = version_stamp()
         chosen = result.run
         skipped = [i for i, stage in enumerate(chosen.history) if stage.skipped]
@@ -603,25 +604,30 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
     def _from_rest(self, Xs: list, at_rest: bool) -> tuple[list, np.ndarray]:
         """The sequences preceded by the run-in that brings the model to rest.
 
-        Only when ``at_rest`` (no initial conditions given); see
-        :func:`~sysid_nn._state_estimation.rest_run_in`. Returns the
-        sequences and the run-in length of each.
+        Only when ``at_rest`` (no initial conditions given) and the model
+        has a rest (see :func:`~sysid_nn._state_estimation.rest_output`;
+        found again for the current weights, which the user may have
+        changed since ``rest_output_`` was kept). The run-in is run with each
+        sequence, not replaced by its end state, so that the weights'
+        uncertainty reaches the rest too. Returns the sequences and the
+        run-in length of each.
         """
-        if not at_rest or not hasattr(self, "_y_range"):
-            # (Models fitted before the range was kept start from zero.)
-            return Xs, np.zeros(len(Xs), dtype=np.int64)
+        # (Models fitted before the range was kept have no rest: from zero.)
+        has_rest = at_rest and hasattr(self, "_y_range")
+        lead = _RUN_IN if has_rest and self._rest_output() is not None else 0
+        Xs = [np.concatenate([np.zeros((lead, Xi.shape[1])), Xi]) for Xi in Xs]
+        return Xs, np.full(len(Xs), lead, dtype=np.int64)
 
-        def free_run(runs):
-            data = self._stack(runs, None)
+    def _rest_output(self) -> np.ndarray | None:
+        """The output at rest of the current weights (user units), or None."""
+
+        def free_run(X):
+            data = self._stack([X], None)
             Yhat, _, diverged = self._free_run(data, None)
-            return [Yhat[a + data.h : b] for a, b in pairwise(data.starts)], diverged
+            return Yhat[data.h :], bool(diverged[0] >= 0)
 
-        leads = np.array(rest_run_in(free_run, Xs, self._y_range), dtype=np.int64)
-        Xs = [
-            np.concatenate([np.zeros((k, Xi.shape[1])), Xi])
-            for Xi, k in zip(Xs, leads, strict=True)
-        ]
-        return Xs, leads
+        rest = rest_output(free_run, self.n_features_in_, self._y_range)
+        return None if rest is None else rest * self._y_scale + self._y_mean
 
     def _free_run(self, data: _Data, initial, want_jac: bool = False):
         """Free run of the fitted model from the initial conditions in ``data``.

@@ -130,6 +130,12 @@ validation_start_window_ : int or None
     samples (as ``y_init`` does) at least halves the linear model's
     validation error, the number of those samples, fitted before each
     validation run; 0 otherwise, None without validation records.
+rest_output_ : ndarray of shape (n_outputs,) or None
+    The output at the model's rest, where its free run settles under zero
+    excitation (after 8192 samples of it; user units): free runs without
+    initial conditions start there. None where the model does not settle
+    (an integrating or self-oscillating one) or settles outside the range
+    of the training outputs; free runs then start from zero.
 linear_score_ : float or None
     Negative selection loss of that linear model; None where it is not a
     candidate (no hidden layer, no linear part, or the ISSM's TDL start).

@@ -8,8 +8,8 @@
   schedule's linear start and segment states come from them.
 * :func:`fit_initial_condition`: the initial condition of a fitted model
   whose free run best fits a measured window (``simulate(X, y_init=...)``).
-* :func:`rest_run_in`: the run-in that brings a fitted model to rest
-  before a free run with no initial conditions given.
+* :func:`rest_output`: where a fitted model settles under zero excitation,
+  the rest its free runs start from when no initial conditions are given.
 """
 
 from __future__ import annotations
@@ -187,41 +187,38 @@ def fit_initial_condition(residuals, v0: np.ndarray) -> np.ndarray:
 
 
 #: Samples of constant excitation that bring a fitted model to rest before a
-#: free run (:func:`rest_run_in`), the last of them over which its output
+#: free run (:func:`rest_output`), the last of them over which its output
 #: must stay constant, and by how much it may change there (standardised).
 _RUN_IN = 8192
 _SETTLED_TAIL = 2048
 _SETTLED_TOL = 1e-6
 
 
-def rest_run_in(free_run, Xs: list, y_range) -> list[int]:
-    """Length of the run-in that brings a fitted model to rest, per sequence.
+def rest_output(free_run, n_inputs: int, y_range) -> np.ndarray | None:
+    """Where a fitted model settles under zero excitation, or None.
 
     A network's zero state is not its rest: its maps have biases, so a free
     run from zero starts with a transient of the model's own that the
     system, at rest, does not have (on Silverbox tens of millivolts over the
     first hundred samples). The rest of a model is where its free run
-    settles under zero excitation, the excitation the free run assumes
-    before the first sample; each sequence is simulated after ``_RUN_IN``
-    samples of it. Where the output still moves over the run-in's last
-    ``_SETTLED_TAIL`` samples (an integrating or self-oscillating model),
-    diverged, or settled outside ``y_range``, the range of the training
-    outputs (zero excitation outside the training excitation, whose rest
-    the model extrapolates: on Cascaded Tanks the linear model's rest is
-    -6 V, the training outputs span 2.9-10 V), the run starts from zero as
-    before (run-in 0).
+    settles under zero excitation, the excitation a free run assumes before
+    the first sample: free runs start after ``_RUN_IN`` samples of it. None
+    where the output still moves over the run-in's last ``_SETTLED_TAIL``
+    samples (an integrating or self-oscillating model), diverged, or settled
+    outside ``y_range``, the range of the training outputs (zero excitation
+    outside the training excitation, whose rest the model extrapolates: on
+    Cascaded Tanks the linear model's rest is -6 V, the training outputs
+    span 2.9-10 V); free runs then start from zero as in the paper.
 
-    ``free_run(Xs)`` returns the standardised free-run outputs of each
-    sequence from the zero initial conditions, and the divergence index of
-    each (-1: none); ``y_range`` is ``(lowest, highest)`` standardised
-    training output, per output.
+    ``free_run(X)`` returns the standardised free-run output of one sequence
+    from the zero initial conditions and whether it diverged; ``y_range``
+    is ``(lowest, highest)`` standardised training output, per output.
+    Returns the settled standardised output.
     """
-    runs = [np.zeros((_RUN_IN, np.shape(Xi)[1])) for Xi in Xs]
-    outputs, diverged = free_run(runs)
-    leads = []
-    for Y, bad in zip(outputs, diverged, strict=True):
-        tail = Y[-_SETTLED_TAIL:]
-        settled = bad < 0 and np.all(np.abs(tail - tail[-1]) <= _SETTLED_TOL)
-        inside = np.all((y_range[0] <= tail[-1]) & (tail[-1] <= y_range[1]))
-        leads.append(_RUN_IN if settled and inside else 0)
-    return leads
+    Y, diverged = free_run(np.zeros((_RUN_IN, n_inputs)))
+    tail = Y[-_SETTLED_TAIL:]
+    if diverged or not np.all(np.abs(tail - tail[-1]) <= _SETTLED_TOL):
+        return None
+    if not np.all((y_range[0] <= tail[-1]) & (tail[-1] <= y_range[1])):
+        return None
+    return tail[-1].copy()

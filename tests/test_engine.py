@@ -28,7 +28,7 @@ from sysid_nn import (
     ISSMRegressor,
     TDLRegressor,
 )
-from sysid_nn._state_estimation import _RUN_IN, rest_run_in
+from sysid_nn._state_estimation import _RUN_IN, rest_output
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "sysid_nn"
 
@@ -431,10 +431,11 @@ def test_a_record_at_rest_is_simulated_from_the_models_rest(model, zero):
     start = slice(0, 20)
     assert np.max(np.abs(at_rest - y[2])[start]) < 0.05
     assert np.max(np.abs(from_zero - y[2])[start]) > 0.2
-    # Under no excitation a model at rest stays there.
+    # Under no excitation a model at rest stays there, at rest_output_.
     quiet = model.simulate(np.zeros((100, 1)))
     np.testing.assert_allclose(quiet, quiet[-1], atol=1e-6)
-    np.testing.assert_allclose(quiet[-1], 1.0, atol=0.05)
+    np.testing.assert_allclose(quiet[-1], model.rest_output_[0], atol=1e-9)
+    np.testing.assert_allclose(model.rest_output_, [1.0], atol=0.05)
     # The rest is the end of a run-in over zero excitation from zero.
     lead = np.zeros((_RUN_IN, 1))
     run = model.simulate(np.vstack([lead, X[2]]), **zero(model))
@@ -447,19 +448,24 @@ def test_a_record_at_rest_is_simulated_from_the_models_rest(model, zero):
         np.testing.assert_allclose(states[:, 0], at_rest)
 
 
-def test_a_model_that_does_not_settle_in_range_starts_from_zero():
+def test_a_model_that_does_not_settle_in_range_has_no_rest():
     settled = np.ones((_RUN_IN, 1))
     drifting = np.linspace(0.0, 1.0, _RUN_IN)[:, None]
-    runs = [settled, drifting, settled, 3.0 * settled]
 
-    def free_run(inputs):
-        assert all(np.all(u == 0.0) for u in inputs)  # zero excitation
-        return runs, np.array([-1, -1, 10, -1])
+    def runs(Y, diverged=False):
+        def free_run(X):
+            assert X.shape == (_RUN_IN, 2) and np.all(X == 0.0)  # zero excitation
+            return Y, diverged
 
-    leads = rest_run_in(free_run, [np.ones((5, 1))] * 4, (-2.0, 2.0))
-    # Settled; still moving (an integrator); diverged; settled outside the
-    # training outputs' range: the zero start for all but the first.
-    assert leads == [_RUN_IN, 0, 0, 0]
+        return free_run
+
+    y_range = (-2.0, 2.0)
+    np.testing.assert_array_equal(rest_output(runs(settled), 2, y_range), [1.0])
+    # Still moving (an integrator); diverged; settled outside the training
+    # outputs' range: no rest, free runs start from zero.
+    assert rest_output(runs(drifting), 2, y_range) is None
+    assert rest_output(runs(settled, diverged=True), 2, y_range) is None
+    assert rest_output(runs(3.0 * settled), 2, y_range) is None
 
 
 # ------------------------------------------------------ observable weights
