@@ -128,7 +128,7 @@ def _simulate(model, X, name: str, benchmark: str, n_period: int, y_init=None):
     """
     if benchmark == "boucwen" and name == "multisine":
         return model.simulate(np.tile(X, (2, 1)))[-n_period:]
-    if y_init is not None and len(y_init):
+    if y_init is not None:
         return model.simulate(X, y_init=y_init)
     return model.simulate(X)
 
@@ -163,10 +163,12 @@ def run_one(benchmark: str, model_name: str, data, validation="tail") -> list[di
     rows = []
     for name, X, y in zip(data.test_names, data.X_test, data.y_test, strict=True):
         err = (y - _simulate(model, X, name, benchmark, len(y)))[data.n_skip :]
-        window = y[: data.n_skip]
-        err_w = (y - _simulate(model, X, name, benchmark, len(y), window))[
-            data.n_skip :
-        ]
+        # Without an initialisation window (Bouc-Wen) both runs are from rest.
+        err_w = err
+        if data.n_skip:
+            window = y[: data.n_skip]
+            y_window = _simulate(model, X, name, benchmark, len(y), window)
+            err_w = (y - y_window)[data.n_skip :]
         rows.append(
             {
                 "benchmark": benchmark,
