@@ -286,6 +286,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             modelled = train_data.Y[train_data.modelled]
             self._y_range = (modelled.min(axis=0), modelled.max(axis=0))
             self.rest_output_ = self._rest_output()
+            self._rest_weights = self.coefs_.copy()  # whose rest that is
         self._sysid_nn_version = version_stamp()
         chosen = result.run
         skipped = [i for i, stage in enumerate(chosen.history) if stage.skipped]
@@ -605,16 +606,18 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         """The sequences preceded by the run-in that brings the model to rest.
 
         Only when ``at_rest`` (no initial conditions given) and the model
-        has a rest (see :func:`~sysid_nn._state_estimation.rest_output`;
-        found again for the current weights, which the user may have
-        changed since ``rest_output_`` was kept). The run-in is run with each
-        sequence, not replaced by its end state, so that the weights'
-        uncertainty reaches the rest too. Returns the sequences and the
-        run-in length of each.
+        has a rest (see :func:`~sysid_nn._state_estimation.rest_output`:
+        ``rest_output_`` for the fitted weights, found again for weights
+        changed since). The run-in is run with each sequence, not replaced
+        by its end state, so that the weights' uncertainty reaches the rest
+        too. Returns the sequences and the run-in length of each.
         """
         # (Models fitted before the range was kept have no rest: from zero.)
-        has_rest = at_rest and hasattr(self, "_y_range")
-        lead = _RUN_IN if has_rest and self._rest_output() is not None else 0
+        rest = None
+        if at_rest and hasattr(self, "_y_range"):
+            fitted = np.array_equal(self.coefs_, self._rest_weights)
+            rest = self.rest_output_ if fitted else self._rest_output()
+        lead = _RUN_IN if rest is not None else 0
         Xs = [np.concatenate([np.zeros((lead, Xi.shape[1])), Xi]) for Xi in Xs]
         return Xs, np.full(len(Xs), lead, dtype=np.int64)
 
