@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pickle
 import threading
+import copy
 import warnings
 
 import joblib
@@ -362,6 +363,39 @@ def test_outputs_mirror_inputs_and_initial_state():
         model.predict(X[0], y[0], horizon=10_000),
         model.simulate(X[0], initial_state=np.zeros(4)),
     )
+
+
+def test_unmeasured_state_coordinates_do_not_change_the_simulation():
+    # The unmeasured states live in the network's own coordinates: scaling one
+    # of them changes the states, not the outputs, and must not make a bounded
+    # run count as divergent (the guard bounds the outputs, not every state).
+    X, y = _sequences(3)
+    model = ISSMRegressor(
+        n_states=4, hidden_layer_sizes=(5,), n_init=1, max_iter=5, random_state=0
+    ).fit(X, y)
+    reference = model.predict_states(X[0], y[0]).states
+    j = 3  # an unmeasured state, taken far beyond the outputs' range
+    c = 1e3 * model._bound / np.abs(reference[:, j]).max()
+    w = model.coefs_.copy()
+    layout = model._layout()
+    (W1, _), (W2, b2) = layout.matrices(w)
+    bypass = layout.bypass_matrix(w)
+    W1[:, j] /= c
+    bypass[:, j] /= c
+    W2[j] *= c
+    b2[j] *= c
+    bypass[j] *= c
+    scaled = copy.deepcopy(model)
+    scaled.coefs_ = w
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DivergenceWarning)
+        sim = scaled.simulate(X)
+        states = scaled.predict_states(X[0], y[0]).states
+    for a, b in zip(sim, model.simulate(X), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(states[:, :j], reference[:, :j], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(states[:, j], c * reference[:, j], rtol=1e-6)
+    assert np.abs(states[:, j]).max() > scaled._bound
 
 
 def test_innovation_refit_leaves_free_run_unchanged():

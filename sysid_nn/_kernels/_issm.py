@@ -49,10 +49,15 @@ def _network_input(x, U, t, nk, e, z):
 
 @njit(cache=True, inline="always")
 def _advance(w, sizes, act, bypass, x, U, t, nk, e, z, acts, out, bound):
-    """One step of the network from state ``x``; True if it left the range."""
+    """One step of the network from state ``x``; True if it left the range.
+
+    The measured states (the first ``p``, ``p = e.shape[0]``) must stay within
+    ``bound``, the others finite: their coordinates are the network's own,
+    and a bounded run may take them far beyond the outputs' range.
+    """
     _network_input(x, U, t, nk, e, z)
     mlp_forward(w, sizes, act, bypass, z, acts, out)
-    return out_of_range(out, bound)
+    return out_of_range(out, bound, e.shape[0])
 
 
 @njit(cache=True, inline="always")
@@ -222,8 +227,9 @@ def issm_run(
     receives ``d x(t) / d z``, whose blocks are ``Phi(t)`` and ``K(t)`` of
     eq. 12. ``Z`` and ``A`` keep the network
     inputs and hidden activations for the adjoint pass when they have rows.
-    ``diverged[s]`` is the first modelled index of sequence ``s`` whose state
-    left ``[-bound, bound]``, or -1. With ``filt``, simulated segments start
+    ``diverged[s]`` is the first modelled index of sequence ``s`` whose
+    measured states (the outputs) left ``[-bound, bound]`` or whose state
+    became non-finite, or -1. With ``filt``, simulated segments start
     from the innovation filter run beside them (see the module docstring);
     ``Z`` and ``A`` then hold no usable adjoint state.
     """

@@ -167,9 +167,12 @@ def mlp_vjp(w, sizes, act, bypass, z, acts, v, gw, gz, delta, delta_prev):
 
 
 @njit(cache=True, inline="always")
-def out_of_range(out, bound):
-    """True when an output is non-finite or beyond ``bound`` (divergence)."""
+def out_of_range(out, bound, n_bounded):
+    """True when a value of ``out`` is non-finite, or one of its first
+    ``n_bounded`` is beyond ``bound`` (divergence)."""
     for j in range(out.shape[0]):
-        if not np.abs(out[j]) <= bound:  # also catches NaN
+        size = np.abs(out[j])
+        # The negated comparisons also catch NaN.
+        if not (size <= bound if j < n_bounded else size < np.inf):
             return True
     return False

@@ -107,7 +107,7 @@ def _step(
     mlp_forward(w, sizes, act, bypass, z, acts, out)
     if keep:
         keep_step(Z, A, t, z, acts)
-    if out_of_range(out, bound):
+    if out_of_range(out, bound, out.shape[0]):
         return False
     for k in range(out.shape[0]):
         Yhat[t, k] = out[k]
