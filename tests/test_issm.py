@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import copy
 import pickle
 import threading
-import copy
 import warnings
 
 import joblib
