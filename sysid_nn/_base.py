@@ -66,6 +66,21 @@ __all__ = ["DivergenceWarning"]
 _DIVERGENCE_FACTOR = 100.0
 
 
+def after_run_in(diverged: np.ndarray, leads: np.ndarray) -> np.ndarray:
+    """Divergence indices counted from the user's first sample.
+
+    ``diverged`` counts from the start of each run, ``leads`` is the run-in
+    before the user's samples (see ``_from_rest``); a divergence within the
+    run-in is reported at the first sample, and -1 (none) stays -1.
+
+    Examples
+    --------
+    >>> after_run_in(np.array([-1, 8200, 100]), np.array([8192, 8192, 8192]))
+    array([-1,  8,  0])
+    """
+    return np.where(diverged >= 0, np.maximum(diverged - leads, 0), -1)
+
+
 class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
     """Base class of the recurrent-network regressors (not public).
 
@@ -593,7 +608,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         Xs, leads = self._from_rest(Xs, initial is None and past is None)
         data = self._stack(Xs, None, initial, past)
         Yhat, J, diverged = self._free_run(data, initial, return_std)
-        self._warn_divergence(np.where(diverged >= 0, diverged - leads, -1), as_list)
+        self._warn_divergence(after_run_in(diverged, leads), as_list)
         y_sim = self._unstack(Yhat, data, True, self._y_1d)
         y_sim = [y[k:] for y, k in zip(y_sim, leads, strict=True)]
         if not return_std:

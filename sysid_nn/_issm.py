@@ -12,7 +12,7 @@ from sklearn.utils import Bunch
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from sysid_nn._base import _RecurrentRegressorBase
+from sysid_nn._base import _RecurrentRegressorBase, after_run_in
 from sysid_nn._data import _FREE_RUN, _Data
 from sysid_nn._estimator_docs import document_estimator
 from sysid_nn._innovation import UnstablePredictorWarning, stabilise_predictor
@@ -422,7 +422,7 @@ default=None
         data, X0, as_list, leads = self._prepare_call(X, y, initial_state)
         seg = 1 if y is not None else _FREE_RUN
         _, _, diverged, state = self._run_from(self.coefs_, data, seg, False, X0, True)
-        diverged = np.where(diverged >= 0, diverged - leads, -1)
+        diverged = after_run_in(diverged, leads)
         self._warn_divergence(diverged, as_list)
         Xs, D = state[0], state[3]
         n, p, m = self.n_states_, self.n_outputs_, self.n_features_in_
