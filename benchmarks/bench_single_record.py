@@ -17,7 +17,7 @@ magnitude. This benchmark measures, per pool seed, noise level and network:
 
 Usage::
 
-    python benchmarks/bench_single_record.py              # full run, ~10 min
+    python benchmarks/bench_single_record.py              # full run, ~4 min on 2 cores
     python benchmarks/bench_single_record.py --seeds 2024 --noise 0.01 --n-fits 6
 
 Writes ``results_single_record.md`` next to this file (``--out`` elsewhere).
