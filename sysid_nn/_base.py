@@ -64,6 +64,11 @@ __all__ = ["DivergenceWarning"]
 #: A free run whose standardised output exceeds this multiple of the largest
 #: standardised training output is declared divergent.
 _DIVERGENCE_FACTOR = 100.0
+#: Evaluations per unknown the initial-state fit of ``y_init`` may take, ten
+#: times the solver's default of 100: the TDL's six output lags on the
+#: Wiener-Hammerstein test window (lag-difference coordinates, nearly flat
+#: along some) converged after 1593 (0.5 s) and stopped at the default 600.
+_USER_START_EVALUATIONS = 1000
 
 
 def after_run_in(diverged: np.ndarray, leads: np.ndarray) -> np.ndarray:
@@ -683,6 +688,12 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         for i, (Xi, yw) in enumerate(zip(Xs, windows, strict=True)):
             where = f"y_init[{i}]" if as_list else "y_init"
             yw = np.asarray(yw, dtype=np.float64)
+            if yw.size == 0:
+                raise ValueError(
+                    f"{where} is empty: the initial state is fitted to the "
+                    "measured outputs over the first samples of X. Pass at least "
+                    "one sample, or leave y_init out to start from rest."
+                )
             yw = yw.reshape(len(yw), -1) if yw.ndim else yw.reshape(1, 1)
             bad = ~np.isfinite(yw)
             if bad.any():
@@ -715,7 +726,9 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
                 return (Yhat[data.h :] - target).ravel()
 
             v0 = ((self._initial_guess(yw[0]) - offset) / scale).ravel()
-            v, success, message = fit_initial_condition(residuals, v0)
+            v, success, message = fit_initial_condition(
+                residuals, v0, max_nfev=_USER_START_EVALUATIONS * len(v0)
+            )
             if not success:
                 warnings.warn(
                     f"The initial state fitted to {where} did not converge "

@@ -162,14 +162,17 @@ def lowpass(Y: np.ndarray, U: np.ndarray, starts, h: int, edge: float):
 _DIVERGED_RESIDUAL = 1e3
 
 
-def fit_initial_condition(residuals, v0: np.ndarray) -> np.ndarray:
+def fit_initial_condition(
+    residuals, v0: np.ndarray, max_nfev: int | None = None
+) -> np.ndarray:
     """Initial condition whose free run best fits a measured window.
 
     ``residuals(v)`` returns the free-run errors over the window started from
     the (standardised) initial condition ``v``; NaN where the run diverged.
     This is an output-error fit of the few initial values (consistent under
     white output noise), solved by least squares with a finite-difference
-    Jacobian from the rest-like guess ``v0``. Returns ``(v, success,
+    Jacobian from the rest-like guess ``v0``, in at most ``max_nfev``
+    evaluations (default: the solver's, 100 per unknown). Returns ``(v, success,
     message)``: the solver's result, whether it reports convergence, and why
     not.
     """
@@ -182,7 +185,7 @@ def fit_initial_condition(residuals, v0: np.ndarray) -> np.ndarray:
     # Fewer measured values than unknowns: Levenberg-Marquardt needs at
     # least as many; the trust-region method finds a minimum-norm step.
     method = "trf" if len(finite(v0)) < len(v0) else "lm"
-    result = least_squares(finite, v0, method=method)
+    result = least_squares(finite, v0, method=method, max_nfev=max_nfev)
     return result.x, bool(result.success), result.message
 
 

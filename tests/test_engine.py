@@ -386,6 +386,28 @@ def test_a_failed_initial_state_fit_warns(monkeypatch):
         model.simulate(X[0], y_init=y[0][:20])
 
 
+def test_the_initial_state_fit_of_y_init_has_ten_times_the_solver_budget(
+    monkeypatch,
+):
+    # Windows nearly flat along some initial values (many lags of a smooth
+    # output) need more than the solver's default 100 evaluations per
+    # unknown: the Wiener-Hammerstein TDL's six lags took 1593.
+    from scipy import optimize
+
+    X, y = _arx_records(2)
+    model = TDLRegressor(hidden_layer_sizes=(), n_init=1, random_state=0).fit(X, y)
+    solve, budgets = optimize.least_squares, []
+
+    def spy(fun, x0, **kwargs):
+        budgets.append((len(x0), kwargs.get("max_nfev")))
+        return solve(fun, x0, **kwargs)
+
+    monkeypatch.setattr(optimize, "least_squares", spy)
+    model.simulate(X[0], y_init=y[0][:20])
+    (n_unknowns, budget), *_ = budgets
+    assert budget == 1000 * n_unknowns
+
+
 def test_warnings_name_the_line_that_called_the_package():
     # Warnings are raised at different depths below fit and simulate (and
     # the ISSM's TDL start is an estimator fitted inside another); each
@@ -524,6 +546,8 @@ def test_input_errors_say_what_to_do():
     window[5] = np.nan
     with pytest.raises(ValueError, match=r"y_init contains NaN \(first at sample 5\)"):
         model.simulate(X[0], y_init=window)
+    with pytest.raises(ValueError, match="y_init is empty"):
+        model.simulate(X[0], y_init=y[0][:0])
 
 
 # -------------------------------------------------------- one list rule
