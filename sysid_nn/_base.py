@@ -32,6 +32,7 @@ from itertools import pairwise
 import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import ConvergenceWarning
+from sklearn.utils import Bunch
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
@@ -56,7 +57,12 @@ from sysid_nn._order import select_order
 from sysid_nn._record_checks import trim_padding
 from sysid_nn._schedule import training_stages
 from sysid_nn._solvers import _Objective
-from sysid_nn._state_estimation import _RUN_IN, fit_initial_condition, rest_output
+from sysid_nn._state_estimation import (
+    _RUN_IN,
+    _SETTLED_TOL,
+    fit_initial_condition,
+    rest_check,
+)
 from sysid_nn._training import _single_threaded_blas, fit_stages, train
 
 __all__ = ["DivergenceWarning"]
@@ -305,7 +311,8 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             _uncertainty.fit_covariance(self, train_data)
             modelled = train_data.Y[train_data.modelled]
             self._y_range = (modelled.min(axis=0), modelled.max(axis=0))
-            self.rest_output_ = self._rest_output()
+            self.rest_check_ = self._rest_check()
+            self.rest_output_ = self.rest_check_.output
             self._rest_weights = self.coefs_.copy()  # whose rest that is
         self._sysid_nn_version = version_stamp()
         chosen = result.run
@@ -643,14 +650,30 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
 
     def _rest_output(self) -> np.ndarray | None:
         """The output at rest of the current weights (user units), or None."""
+        return self._rest_check().output
+
+    def _rest_check(self) -> Bunch:
+        """:func:`~sysid_nn._state_estimation.rest_check` of the current
+        weights, in the user's units (``rest_check_``)."""
 
         def free_run(X):
             data = self._stack([X], None)
             Yhat, _, diverged = self._free_run(data, None)
             return Yhat[data.h :], bool(diverged[0] >= 0)
 
-        rest = rest_output(free_run, self.n_features_in_, self._y_range)
-        return None if rest is None else rest * self._y_scale + self._y_mean
+        check = rest_check(free_run, self.n_features_in_, self._y_range)
+        mean, scale = self._y_mean, self._y_scale
+        return Bunch(
+            start=check.start,
+            reason=check.reason,
+            output=None if check.output is None else check.output * scale + mean,
+            end=check.end * scale + mean,
+            change=check.change * scale,
+            tolerance=_SETTLED_TOL * scale,
+            training_range=(self._y_range[0] * scale + mean,
+                            self._y_range[1] * scale + mean),
+            run_in=_RUN_IN,
+        )  # fmt: skip
 
     def _free_run(self, data: _Data, initial, want_jac: bool = False):
         """Free run of the fitted model from the initial conditions in ``data``.

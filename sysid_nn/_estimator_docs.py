@@ -136,6 +136,13 @@ rest_output_ : ndarray of shape (n_outputs,) or None
     initial conditions start there. None where the model does not settle
     (an integrating or self-oscillating one) or settles outside the range
     of the training outputs; free runs then start from zero.
+rest_check_ : Bunch
+    The evidence behind ``rest_output_`` (user units): ``start`` (``"rest"``
+    or ``"zero"``), ``reason`` (one sentence: settled within or outside the
+    training outputs' range, still moving, or diverged), ``end`` (the output
+    after the run-in), ``change`` (its largest change over the run-in's last
+    2048 samples) against ``tolerance``, ``training_range`` (lowest and
+    highest training output) and ``run_in`` (the run-in's length).
 linear_score_ : float or None
     Negative selection loss of that linear model; None where it is not a
     candidate (no hidden layer, no linear part, or the ISSM's TDL start).

@@ -8,8 +8,9 @@
   schedule's linear start and segment states come from them.
 * :func:`fit_initial_condition`: the initial condition of a fitted model
   whose free run best fits a measured window (``simulate(X, y_init=...)``).
-* :func:`rest_output`: where a fitted model settles under zero excitation,
-  the rest its free runs start from when no initial conditions are given.
+* :func:`rest_output`, :func:`rest_check`: where a fitted model settles
+  under zero excitation, the rest its free runs start from when no initial
+  conditions are given, and the evidence.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from __future__ import annotations
 from itertools import pairwise
 
 import numpy as np
+from sklearn.utils import Bunch
 
 #: Output and input lags of the linear one-step model whose residuals give
 #: the noise level.
@@ -216,12 +218,51 @@ def rest_output(free_run, n_inputs: int, y_range) -> np.ndarray | None:
     ``free_run(X)`` returns the standardised free-run output of one sequence
     from the zero initial conditions and whether it diverged; ``y_range``
     is ``(lowest, highest)`` standardised training output, per output.
-    Returns the settled standardised output.
+    Returns the settled standardised output (see :func:`rest_check` for
+    the evidence).
+    """
+    return rest_check(free_run, n_inputs, y_range).output
+
+
+def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
+    """The evidence :func:`rest_output` decides by (standardised units).
+
+    A Bunch with ``output`` (the rest, or None), ``start`` (``"rest"`` or
+    ``"zero"``), ``reason`` (one sentence), ``end`` (the output at the end of
+    the run-in; NaN where it diverged), ``change`` (per output, the largest
+    distance from ``end`` over the run-in's last ``_SETTLED_TAIL`` samples;
+    inf where it diverged) and ``diverged``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> def drifting(X):  # an integrator under zero excitation
+    ...     return np.linspace(0.0, 1.0, len(X))[:, None], False
+    >>> check = rest_check(drifting, 1, (np.array([-2.0]), np.array([2.0])))
+    >>> check.start, check.reason
+    ('zero', 'still moving over the last 2048 samples of the run-in')
     """
     Y, diverged = free_run(np.zeros((_RUN_IN, n_inputs)))
     tail = Y[-_SETTLED_TAIL:]
-    if diverged or not np.all(np.abs(tail - tail[-1]) <= _SETTLED_TOL):
-        return None
-    if not np.all((y_range[0] <= tail[-1]) & (tail[-1] <= y_range[1])):
-        return None
-    return tail[-1].copy()
+    end = tail[-1].copy()
+    with np.errstate(invalid="ignore"):
+        change = np.max(np.abs(tail - end), axis=0)
+    diverged = bool(diverged) or not np.all(np.isfinite(tail))
+    if diverged:
+        end, change = np.full_like(end, np.nan), np.full_like(end, np.inf)
+        reason = "the run-in under zero excitation diverged"
+    elif not np.all(change <= _SETTLED_TOL):
+        reason = f"still moving over the last {_SETTLED_TAIL} samples of the run-in"
+    elif not np.all((y_range[0] <= end) & (end <= y_range[1])):
+        reason = "settled outside the range of the training outputs"
+    else:
+        reason = "settled within the range of the training outputs"
+    rest = reason.startswith("settled within")
+    return Bunch(
+        output=end.copy() if rest else None,
+        start="rest" if rest else "zero",
+        reason=reason,
+        end=end,
+        change=change,
+        diverged=diverged,
+    )

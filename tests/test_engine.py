@@ -28,7 +28,7 @@ from sysid_nn import (
     ISSMRegressor,
     TDLRegressor,
 )
-from sysid_nn._state_estimation import _RUN_IN, rest_output
+from sysid_nn._state_estimation import _RUN_IN, rest_check, rest_output
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "sysid_nn"
 
@@ -458,6 +458,12 @@ def test_a_record_at_rest_is_simulated_from_the_models_rest(model, zero):
     np.testing.assert_allclose(quiet, quiet[-1], atol=1e-6)
     np.testing.assert_allclose(quiet[-1], model.rest_output_[0], atol=1e-9)
     np.testing.assert_allclose(model.rest_output_, [1.0], atol=0.05)
+    check = model.rest_check_
+    assert (check.start, check.run_in) == ("rest", _RUN_IN)
+    assert check.reason == "settled within the range of the training outputs"
+    np.testing.assert_array_equal(check.output, model.rest_output_)
+    assert np.all(check.change <= check.tolerance)
+    assert check.training_range[0][0] < check.end[0] < check.training_range[1][0]
     # The rest is the end of a run-in over zero excitation from zero.
     lead = np.zeros((_RUN_IN, 1))
     run = model.simulate(np.vstack([lead, X[2]]), **zero(model))
@@ -488,6 +494,20 @@ def test_a_model_that_does_not_settle_in_range_has_no_rest():
     assert rest_output(runs(drifting), 2, y_range) is None
     assert rest_output(runs(settled, diverged=True), 2, y_range) is None
     assert rest_output(runs(3.0 * settled), 2, y_range) is None
+    # The evidence says which, with the numbers.
+    reasons = {
+        "still moving": runs(drifting),
+        "diverged": runs(settled, diverged=True),
+        "outside the range": runs(3.0 * settled),
+        "within the range": runs(settled),
+    }
+    for reason, free_run in reasons.items():
+        check = rest_check(free_run, 2, y_range)
+        assert reason in check.reason
+        assert check.start == ("rest" if reason == "within the range" else "zero")
+    moving = rest_check(runs(drifting), 2, y_range)
+    assert moving.change[0] == pytest.approx(2047 / (_RUN_IN - 1))
+    assert np.isinf(rest_check(runs(settled, diverged=True), 2, y_range).change[0])
 
 
 # ------------------------------------------------------ observable weights
