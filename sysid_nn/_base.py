@@ -382,6 +382,8 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self.loss_ = chosen.loss
         self.best_validation_score_ = -chosen.val_loss if with_validation else None
         self.restart_scores_ = np.array([-r.score for r in result.runs])
+        self.restart_losses_ = np.array([r.loss for r in result.runs])
+        self.restart_bounded_ = np.array(result.bounded, dtype=bool)
         self.n_restarts_ = len(result.runs)
         self.best_restart_ = result.chosen
         self.selected_ = result.selected
@@ -389,6 +391,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self.linear_score_ = (
             None if lin is None else (-lin.score if np.isfinite(lin.score) else -np.inf)
         )
+        self.linear_loss_ = None if lin is None else lin.loss
         self.best_stage_ = chosen.best_stage
         self.training_history_ = [
             [dataclasses.replace(stage) for stage in run.history] for run in result.runs

@@ -80,6 +80,14 @@ best_validation_score_ : float or None
 restart_scores_ : ndarray
     Negative selection loss of every restart (of a restart dropped by the
     successive halving, at the point it stopped).
+restart_losses_ : ndarray
+    Each restart's training loss (the final objective, standardised) at the
+    weights its score is of: with validation records a restart is a
+    candidate only where this is no worse than ``linear_loss_``.
+restart_bounded_ : ndarray of bool
+    Whether each restart's free run stays bounded when the training
+    excitation is scaled to twice its amplitude about its mean; the
+    unbounded ones are candidates only where none is bounded.
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
 best_restart_ : int or None
@@ -146,6 +154,11 @@ rest_check_ : Bunch
 linear_score_ : float or None
     Negative selection loss of that linear model; None where it is not a
     candidate (no hidden layer, no linear part, or the ISSM's TDL start).
+linear_loss_ : float or None
+    That linear model's training loss (as ``restart_losses_``); None where
+    it is not a candidate. ``selected_``, ``best_restart_`` follow from
+    these attributes and ``restart_scores_`` (the user guide's training
+    page, "Selection rule").
 fit_time_ : float
     Seconds spent in training.
 layer_coefs_ : list of ndarray

@@ -612,6 +612,8 @@ default=None
             for name in (
                 "n_iter_",
                 "restart_scores_",
+                "restart_losses_",
+                "restart_bounded_",
                 "n_restarts_",
                 "best_restart_",
                 "best_stage_",

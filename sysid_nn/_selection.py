@@ -238,7 +238,8 @@ def bounded_beyond_range(est, w: np.ndarray, train) -> bool:
 
 
 def choose(est, train, val, runs: list, linear: LinearCandidate | None):
-    """The run ``fit`` keeps and what it is: ``(run, "restart" | "linear")``.
+    """The run ``fit`` keeps, what it is and the evidence: ``(run,
+    "restart" | "linear", bounded)``, ``bounded`` a flag per run.
 
     Restarts whose free run diverges beyond the training range are
     disqualified (unless all are), and with validation records those whose
@@ -253,7 +254,7 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
     pool = [r for r, ok in zip(runs, bounded, strict=True) if ok] or runs
     best = min(pool, key=lambda r: r.score)
     if linear is None:
-        return best, "restart"
+        return best, "restart", bounded
     lin = linear.run
     if val is not None and np.isfinite(lin.loss):
         # ``loss``: the final objective on the training records (the free
@@ -264,11 +265,11 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
     else:
         worse = 0
     if best is not None and (best.score < lin.score or not np.isfinite(lin.score)):
-        return best, "restart"
+        return best, "restart", bounded
     if best is not None and best.score - lin.score <= _TIE * (1.0 + lin.score):
         # A tie within rounding (both exact, or the restarts never left
         # the linear start): the linear model, nothing to warn about.
-        return replace(lin, w=linear.w), "linear"
+        return replace(lin, w=linear.w), "linear", bounded
     if best is None:
         what = (
             f"no trained network fitted the training records better (the "
@@ -301,4 +302,4 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
         UserWarning,
         stacklevel=user_stacklevel(),
     )
-    return replace(lin, w=linear.w), "linear"
+    return replace(lin, w=linear.w), "linear", bounded

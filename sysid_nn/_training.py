@@ -202,6 +202,9 @@ class Training:
     linear: _selection.LinearCandidate | None = None
     #: The chosen run (a restart's, or the linear model's).
     chosen_run: _Run | None = None
+    #: Per run, whether its free run stays bounded at twice the training
+    #: amplitude (see :func:`sysid_nn._selection.bounded_beyond_range`).
+    bounded: list = field(default_factory=list)
 
     @property
     def run(self) -> _Run:
@@ -237,7 +240,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         for k, result in zip(kept, done, strict=True):
             results[k] = result
     runs = [run for _, run in results]
-    best, chosen, selected = choose_restart(est, train_data, val, runs, linear)
+    best, chosen, selected, bounded = choose_restart(est, train_data, val, runs, linear)
     if not np.all(np.isfinite(chosen.w)):
         raise ValueError(
             "The solver produced non-finite weights. Check the data for "
@@ -255,11 +258,13 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         selected,
         linear,
         chosen,
+        bounded,
     )
 
 
 def choose_restart(est, train_data, val, runs: list, linear):
-    """The run whose weights ``fit`` returns: ``(index, run, selected)``.
+    """The run whose weights ``fit`` returns: ``(index, run, selected,
+    bounded)``, ``bounded`` whether each run's free run stays bounded.
 
     Among the restarts whose free run stays bounded beyond the training
     range, the one with the lowest score (the validation loss of its best
@@ -268,9 +273,9 @@ def choose_restart(est, train_data, val, runs: list, linear):
     it beats the linear model; else the linear model (``index`` None,
     ``selected`` ``"linear"``). See :func:`sysid_nn._selection.choose`.
     """
-    chosen, selected = _selection.choose(est, train_data, val, runs, linear)
+    chosen, selected, bounded = _selection.choose(est, train_data, val, runs, linear)
     index = next((k for k, r in enumerate(runs) if r is chosen), None)
-    return index, chosen, selected
+    return index, chosen, selected, bounded
 
 
 def fallback(est, w: np.ndarray, train_data: _Data, val: _Data | None):

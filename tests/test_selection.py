@@ -104,6 +104,50 @@ def test_network_that_beats_the_linear_model_is_kept():
     assert net.linear_score_ < net.restart_scores_.max()
 
 
+def _replayed_choice(net):
+    """``(selected_, best_restart_)`` recomputed from the fitted evidence."""
+    k_all = np.arange(net.n_restarts_)
+    pool = k_all[net.restart_bounded_] if net.restart_bounded_.any() else k_all
+    if net.linear_loss_ is not None and net.best_validation_score_ is not None:
+        tie = 1e-12 * (1.0 + net.linear_loss_)
+        pool = pool[net.restart_losses_[pool] <= net.linear_loss_ + tie]
+    if pool.size == 0:
+        return "linear", None
+    best = int(pool[np.argmax(net.restart_scores_[pool])])
+    if net.linear_score_ is None or net.restart_scores_[best] > net.linear_score_:
+        return "restart", best
+    return "linear", None
+
+
+def test_the_choice_among_restarts_is_explained_by_fitted_attributes(monkeypatch):
+    # Which restarts were bounded at twice the training amplitude, their
+    # training losses and the linear model's: the choice follows from them.
+    from sysid_nn import _selection
+
+    (X, y, _), (Xv, yv, _) = (_linear_record(s) for s in (0, 1))
+    y, yv = np.tanh(2 * y), np.tanh(2 * yv)
+    params = dict(n_init=3, max_iter=30, random_state=0)
+    net = TDLRegressor(**params).fit(X, y, X_val=Xv, y_val=yv)
+    assert net.restart_bounded_.all()
+    assert (net.selected_, net.best_restart_) == _replayed_choice(net)
+    winner = net.best_restart_
+    # The winner made to diverge at twice the amplitude: held out, and the
+    # next best restart that fits the training records is chosen.
+    checked = []
+    check = _selection.bounded_beyond_range
+
+    def unbounded_winner(est, w, train):
+        checked.append(w)
+        return len(checked) - 1 != winner and check(est, w, train)
+
+    monkeypatch.setattr(_selection, "bounded_beyond_range", unbounded_winner)
+    held = TDLRegressor(**params).fit(X, y, X_val=Xv, y_val=yv)
+    assert held.restart_bounded_.tolist() == [k != winner for k in range(3)]
+    np.testing.assert_array_equal(held.restart_scores_, net.restart_scores_)
+    assert held.best_restart_ != winner
+    assert (held.selected_, held.best_restart_) == _replayed_choice(held)
+
+
 def test_validation_record_from_rest_judges_as_the_tail_within_the_record():
     # Slow dynamics: a validation record cut from the motion and simulated
     # from rest starts with a long transient that is no fault of the model.
@@ -153,9 +197,10 @@ def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
         _Run(bad, 0.0, 0.5, 0.5, 1, True, [], 0),
         _Run(good, 0.0, 1.0, 1.0, 1, True, [], 0),
     ]
-    chosen, selected = choose(model, train, None, runs, None)
+    chosen, selected, bounded = choose(model, train, None, runs, None)
     assert chosen.w is good
     assert selected == "restart"
+    assert bounded == [False, True]
 
 
 def test_restart_that_fits_its_training_records_worse_than_linear_is_not_chosen():
@@ -178,16 +223,16 @@ def test_restart_that_fits_its_training_records_worse_than_linear_is_not_chosen(
     linear = LinearCandidate(
         run=_Run(w.copy(), 0.20, 0.20, 0.20, 1, True, [], 0), w=w.copy()
     )
-    chosen, selected = choose(model, train, train, [lucky, sound], linear)
+    chosen, selected, _ = choose(model, train, train, [lucky, sound], linear)
     assert chosen is sound
     assert selected == "restart"
     # Without validation records the score is the training loss itself.
-    chosen, _ = choose(model, train, None, [lucky, sound], linear)
+    chosen, _, _ = choose(model, train, None, [lucky, sound], linear)
     assert chosen is lucky
     # No restart fits better than the linear model: it is returned, and the
     # warning says why.
     with pytest.warns(UserWarning, match="1 of 1 fitted the training records worse"):
-        chosen, selected = choose(model, train, train, [lucky], linear)
+        chosen, selected, _ = choose(model, train, train, [lucky], linear)
     assert selected == "linear"
     assert chosen.w is linear.w
 
