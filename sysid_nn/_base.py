@@ -72,8 +72,8 @@ __all__ = ["DivergenceWarning"]
 _DIVERGENCE_FACTOR = 100.0
 #: Evaluations per unknown the initial-state fit of ``y_init`` may take, ten
 #: times the solver's default of 100: the TDL's six output lags on the
-#: Wiener-Hammerstein test window (lag-difference coordinates, nearly flat
-#: along some) converged after 1593 (0.5 s) and stopped at the default 600.
+#: Wiener-Hammerstein test window (nearly flat along some combinations of
+#: the lag values) converged after 1593 (0.5 s) and stopped at the default 600.
 _USER_START_EVALUATIONS = 1000
 
 

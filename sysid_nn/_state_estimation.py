@@ -166,7 +166,7 @@ _DIVERGED_RESIDUAL = 1e3
 
 def fit_initial_condition(
     residuals, v0: np.ndarray, max_nfev: int | None = None
-) -> np.ndarray:
+) -> tuple[np.ndarray, bool, str]:
     """Initial condition whose free run best fits a measured window.
 
     ``residuals(v)`` returns the free-run errors over the window started from
@@ -248,6 +248,7 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     with np.errstate(invalid="ignore"):
         change = np.max(np.abs(tail - end), axis=0)
     diverged = bool(diverged) or not np.all(np.isfinite(tail))
+    rest = False
     if diverged:
         end, change = np.full_like(end, np.nan), np.full_like(end, np.inf)
         reason = "the run-in under zero excitation diverged"
@@ -256,8 +257,7 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     elif not np.all((y_range[0] <= end) & (end <= y_range[1])):
         reason = "settled outside the range of the training outputs"
     else:
-        reason = "settled within the range of the training outputs"
-    rest = reason.startswith("settled within")
+        rest, reason = True, "settled within the range of the training outputs"
     return Bunch(
         output=end.copy() if rest else None,
         start="rest" if rest else "zero",
