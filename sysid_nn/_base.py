@@ -636,7 +636,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         """The sequences preceded by the run-in that brings the model to rest.
 
         Only when ``at_rest`` (no initial conditions given) and the model
-        has a rest (see :func:`~sysid_nn._state_estimation.rest_output`:
+        has a rest (see :func:`~sysid_nn._state_estimation.rest_check`:
         ``rest_output_`` for the fitted weights, found again for weights
         changed since). The run-in is run with each sequence, not replaced
         by its end state, so that the weights' uncertainty reaches the rest
@@ -646,14 +646,10 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         rest = None
         if at_rest and hasattr(self, "_y_range"):
             fitted = np.array_equal(self.coefs_, self._rest_weights)
-            rest = self.rest_output_ if fitted else self._rest_output()
+            rest = self.rest_output_ if fitted else self._rest_check().output
         lead = _RUN_IN if rest is not None else 0
         Xs = [np.concatenate([np.zeros((lead, Xi.shape[1])), Xi]) for Xi in Xs]
         return Xs, np.full(len(Xs), lead, dtype=np.int64)
-
-    def _rest_output(self) -> np.ndarray | None:
-        """The output at rest of the current weights (user units), or None."""
-        return self._rest_check().output
 
     def _rest_check(self) -> Bunch:
         """:func:`~sysid_nn._state_estimation.rest_check` of the current

@@ -8,9 +8,9 @@
   schedule's linear start and segment states come from them.
 * :func:`fit_initial_condition`: the initial condition of a fitted model
   whose free run best fits a measured window (``simulate(X, y_init=...)``).
-* :func:`rest_output`, :func:`rest_check`: where a fitted model settles
-  under zero excitation, the rest its free runs start from when no initial
-  conditions are given, and the evidence.
+* :func:`rest_check`: where a fitted model settles under zero excitation,
+  the rest its free runs start from when no initial conditions are given,
+  and the evidence for it.
 """
 
 from __future__ import annotations
@@ -192,46 +192,39 @@ def fit_initial_condition(
 
 
 #: Samples of constant excitation that bring a fitted model to rest before a
-#: free run (:func:`rest_output`), the last of them over which its output
+#: free run (:func:`rest_check`), the last of them over which its output
 #: must stay constant, and by how much it may change there (standardised).
 _RUN_IN = 8192
 _SETTLED_TAIL = 2048
 _SETTLED_TOL = 1e-6
 
 
-def rest_output(free_run, n_inputs: int, y_range) -> np.ndarray | None:
-    """Where a fitted model settles under zero excitation, or None.
+def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
+    """Where a fitted model settles under zero excitation, and the evidence.
 
     A network's zero state is not its rest: its maps have biases, so a free
     run from zero starts with a transient of the model's own that the
     system, at rest, does not have (on Silverbox tens of millivolts over the
     first hundred samples). The rest of a model is where its free run
     settles under zero excitation, the excitation a free run assumes before
-    the first sample: free runs start after ``_RUN_IN`` samples of it. None
-    where the output still moves over the run-in's last ``_SETTLED_TAIL``
-    samples (an integrating or self-oscillating model), diverged, or settled
-    outside ``y_range``, the range of the training outputs (zero excitation
-    outside the training excitation, whose rest the model extrapolates: on
-    Cascaded Tanks the linear model's rest is -6 V, the training outputs
-    span 2.9-10 V); free runs then start from zero as in the paper.
+    the first sample: free runs start after ``_RUN_IN`` samples of it. No
+    rest where the output still moves over the run-in's last
+    ``_SETTLED_TAIL`` samples (an integrating or self-oscillating model),
+    diverged, or settled outside ``y_range``, the range of the training
+    outputs (zero excitation outside the training excitation, whose rest the
+    model extrapolates: on Cascaded Tanks the linear model's rest is -6 V,
+    the training outputs span 2.9-10 V); free runs then start from zero as
+    in the paper.
 
     ``free_run(X)`` returns the standardised free-run output of one sequence
     from the zero initial conditions and whether it diverged; ``y_range``
     is ``(lowest, highest)`` standardised training output, per output.
-    Returns the settled standardised output (see :func:`rest_check` for
-    the evidence).
-    """
-    return rest_check(free_run, n_inputs, y_range).output
-
-
-def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
-    """The evidence :func:`rest_output` decides by (standardised units).
-
-    A Bunch with ``output`` (the rest, or None), ``start`` (``"rest"`` or
-    ``"zero"``), ``reason`` (one sentence), ``end`` (the output at the end of
-    the run-in; NaN where it diverged), ``change`` (per output, the largest
-    distance from ``end`` over the run-in's last ``_SETTLED_TAIL`` samples;
-    inf where it diverged) and ``diverged``.
+    Returns a Bunch (standardised units) with ``output`` (the rest, or
+    None), ``start`` (``"rest"`` or ``"zero"``), ``reason`` (one sentence),
+    ``end`` (the output at the end of the run-in; NaN where it diverged),
+    ``change`` (per output, the largest distance from ``end`` over the
+    run-in's last ``_SETTLED_TAIL`` samples; inf where it diverged) and
+    ``diverged``.
 
     Examples
     --------

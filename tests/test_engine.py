@@ -28,7 +28,7 @@ from sysid_nn import (
     ISSMRegressor,
     TDLRegressor,
 )
-from sysid_nn._state_estimation import _RUN_IN, rest_check, rest_output
+from sysid_nn._state_estimation import _RUN_IN, rest_check
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "sysid_nn"
 
@@ -488,12 +488,12 @@ def test_a_model_that_does_not_settle_in_range_has_no_rest():
         return free_run
 
     y_range = (-2.0, 2.0)
-    np.testing.assert_array_equal(rest_output(runs(settled), 2, y_range), [1.0])
+    np.testing.assert_array_equal(rest_check(runs(settled), 2, y_range).output, [1.0])
     # Still moving (an integrator); diverged; settled outside the training
     # outputs' range: no rest, free runs start from zero.
-    assert rest_output(runs(drifting), 2, y_range) is None
-    assert rest_output(runs(settled, diverged=True), 2, y_range) is None
-    assert rest_output(runs(3.0 * settled), 2, y_range) is None
+    assert rest_check(runs(drifting), 2, y_range).output is None
+    assert rest_check(runs(settled, diverged=True), 2, y_range).output is None
+    assert rest_check(runs(3.0 * settled), 2, y_range).output is None
     # The evidence says which, with the numbers.
     reasons = {
         "still moving": runs(drifting),
