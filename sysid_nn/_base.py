@@ -386,6 +386,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self.restart_bounded_ = np.array(result.bounded, dtype=bool)
         self.n_restarts_ = len(result.runs)
         self.best_restart_ = result.chosen
+        self.refined_restart_ = result.refined
         self.selected_ = result.selected
         lin = None if result.linear is None else result.linear.run
         self.linear_score_ = (

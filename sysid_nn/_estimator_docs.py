@@ -93,6 +93,11 @@ n_restarts_ : int
 best_restart_ : int or None
     Index of the chosen restart in ``restart_scores_``; None where the
     linear model was returned (``selected_ == "linear"``).
+refined_restart_ : int or None
+    Index in ``restart_scores_`` of the restart that refines the trained
+    linear model (the last; None where the linear model is no candidate):
+    it starts at the linear model with small hidden weights and runs the
+    final stage of the schedule only.
 best_stage_ : int
     Training stage in which the chosen weights were seen (an index into
     ``training_history_[best_restart_]``).

@@ -600,10 +600,12 @@ default=None
             super()._fit(X, y, X_val=X_val, y_val=y_val)
         finally:
             del self._fit_records
-        # The linear model (best_restart_ None) was trained from the start of
-        # restart _linear_restart.
+        # The linear model (best_restart_ None), and its refinement, were
+        # trained from the start of restart _linear_restart.
         linear_restart = self.__dict__.pop("_linear_restart")
-        restart = linear_restart if self.best_restart_ is None else self.best_restart_
+        restart = self.best_restart_
+        if restart is None or restart == self.refined_restart_:
+            restart = linear_restart
         chosen = self._start_of(restart)
         self.init_, self.linear_model_ = self.__dict__.pop("_linear_starts")[chosen]
         if self.init == "tdl":
@@ -616,6 +618,7 @@ default=None
                 "restart_bounded_",
                 "n_restarts_",
                 "best_restart_",
+                "refined_restart_",
                 "best_stage_",
                 "training_history_",
                 "loss_curve_",

@@ -90,7 +90,8 @@ def report_stage(
         nothing, 1 (or True) a bar per restart on a terminal and one line
         per stage elsewhere, 2 or more one line per stage everywhere.
     restart : tuple of int
-        Index of the restart (from 0) and number of restarts.
+        Index of the restart (from 0) and number of restarts; an index past
+        them is the refinement of the linear model.
     stage : tuple of int
         Index of the stage just finished (from 0) and number of stages.
     segment : str
@@ -108,9 +109,14 @@ def report_stage(
         return
     name = type(estimator).__name__
     (restart, n_restarts), (stage, n_stages) = restart, stage
+    who = (
+        f"restart {restart + 1}/{n_restarts}"
+        if restart < n_restarts
+        else "refinement of the linear model"
+    )
     loss = loss()
     line = (
-        f"[{name}] restart {restart + 1}/{n_restarts} stage {stage + 1}/{n_stages} "
+        f"[{name}] {who} stage {stage + 1}/{n_stages} "
         f"({segment}): {n_iter} iterations, loss {loss:.3e}, "
         f"validation {validation:.3e}"
     )
@@ -125,7 +131,7 @@ def report_stage(
             bar.close()
         bar = _BARS[restart] = tqdm(
             total=n_stages,
-            desc=f"{name} restart {restart + 1}/{n_restarts}",
+            desc=f"{name} {who}",
             unit="stage",
             leave=True,
         )

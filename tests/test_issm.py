@@ -480,7 +480,11 @@ def test_tdl_start_runs_exactly_as_its_tdl(p, m, hidden, activation, delay):
     model = ISSMRegressor(focus="prediction", **params).fit(X[:2], y[:2])
     Xn, yn = X[2], y[2]
     assert model.n_states_ == 3 * p + 2 * m
-    assert len(model.restart_scores_) == 2
+    # The TDL's restarts, and its refinement of the linear model where it is
+    # a network.
+    refined = 2 if len(hidden) else None
+    assert len(model.restart_scores_) == 2 + bool(len(hidden))
+    assert model.tdl_.refined_restart_ == refined == model.refined_restart_
     np.testing.assert_allclose(model.simulate(Xn), model.tdl_.simulate(Xn), atol=1e-10)
     for k in (1, 5):
         np.testing.assert_allclose(
@@ -722,13 +726,17 @@ def test_default_start_follows_the_noise_on_the_records():
     u, y = _noisy_second_order(0.0)
     model = fit(y)
     assert model.init_ == "arx"
-    assert len(model.restart_scores_) == 1
+    # The restart, and the refinement of the linear model.
+    assert len(model.restart_scores_) == 2 and model.refined_restart_ == 1
     # Noisy: the subspace start, and one restart more from the ARX start;
     # init_ and linear_model_ are the chosen restart's.
     u, y = _noisy_second_order(0.05)
     model = fit(y)
-    assert len(model.restart_scores_) == 2
-    assert model.init_ == ["subspace", "arx"][np.argmax(model.restart_scores_)]
+    # (The third run refines the linear model, trained from its own start.)
+    assert len(model.restart_scores_) == 3 and model.refined_restart_ == 2
+    best = np.argmax(model.restart_scores_[:2])
+    if model.best_restart_ == best:
+        assert model.init_ == ["subspace", "arx"][best]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         warnings.filterwarnings(

@@ -178,6 +178,16 @@ def _spy_stages(model, log):
     model._fit_stages = spy
 
 
+def _random_restarts(log, model):
+    """The entries of ``log`` of the random restarts, without the run that
+    refines the linear model (it runs the last stage only, after them)."""
+    refined = [entry for entry in log if entry[0] == model.refined_restart_]
+    assert [(first, stop) for _, first, stop, _ in refined] == [
+        (len(model._stages()) - 1, len(model._stages()))
+    ]
+    return [entry for entry in log if entry[0] != model.refined_restart_]
+
+
 @pytest.mark.parametrize("n_init", [2, 3, 4])
 def test_halving_keeps_the_restart_selected_by_validation(n_init):
     Xs, ys = _records(n=4)
@@ -185,6 +195,7 @@ def test_halving_keeps_the_restart_selected_by_validation(n_init):
     log = []
     _spy_stages(model, log)
     _fit(model, Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
+    log = _random_restarts(log, model)
     n_stages = len(model._stages())
     first = [entry for entry in log if entry[1] == 0]
     later = [entry for entry in log if entry[1] > 0]
@@ -201,11 +212,15 @@ def test_halving_keeps_the_restart_selected_by_validation(n_init):
     # and no dropped restart was better than it.
     final = {**at_cut, **{k: score for k, _, _, score in later}}
     np.testing.assert_allclose(
-        model.restart_scores_, [-final[k] for k in range(n_init)]
+        model.restart_scores_[:n_init], [-final[k] for k in range(n_init)]
     )
     best = min(final, key=final.get)
     assert best in going_on
-    assert model.best_validation_score_ == -final[best]
+    # ... or the linear model's refinement, where it validated better still.
+    chosen = model.best_restart_
+    assert chosen in (best, model.refined_restart_)
+    assert model.best_validation_score_ == model.restart_scores_.max()
+    assert model.best_validation_score_ == model.restart_scores_[chosen]
 
 
 def test_halving_does_not_change_the_restarts_it_keeps(monkeypatch):
@@ -218,7 +233,7 @@ def test_halving_does_not_change_the_restarts_it_keeps(monkeypatch):
     log = []
     _spy_stages(model, log)
     halved = _fit(model, Xs[:3], ys[:3], **fit).restart_scores_
-    kept = [k for k, first, _, _ in log if first > 0]
+    kept = [k for k, first, _, _ in _random_restarts(log, model) if first > 0]
     monkeypatch.setattr(_schedule, "HALVING_AFTER", 10**6)
     whole = _fit(_tdl(n_init=4), Xs[:3], ys[:3], **fit).restart_scores_
     assert len(kept) == 2
@@ -242,6 +257,7 @@ def test_halving_without_validation_ranks_by_the_training_free_run():
     log = []
     _spy_stages(model, log)
     _fit(model, Xs, ys)
+    log = _random_restarts(log, model)
     assert model.best_validation_score_ is None
     assert sum(stop == _schedule.HALVING_AFTER for _, _, stop, _ in log) == 4
     assert sum(first > 0 for _, first, _, _ in log) == 2
@@ -275,5 +291,6 @@ def test_issm_restarts_are_halved_too(small_subsets, monkeypatch):
             "ignore", "A linear one-step model leaves a white misfit", UserWarning
         )
         _fit(model, Xs[:3], ys[:3], X_val=Xs[3:], y_val=ys[3:])
+    log = _random_restarts(log, model)
     assert [first for _, first, _, _ in log] == [0, 0, _schedule.HALVING_AFTER]
     assert rows and set(rows) == {1200}

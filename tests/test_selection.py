@@ -36,11 +36,14 @@ def _nrmse(model, X, y):
 
 @pytest.mark.parametrize(
     ("cls", "params", "seed"),
-    [(TDLRegressor, dict(output_lags=2, input_lags=2), 6), (ISSMRegressor, {}, 21)],
+    [(TDLRegressor, dict(output_lags=2, input_lags=2), 6), (ISSMRegressor, {}, 22)],
 )
 def test_linear_model_is_returned_where_no_restart_beats_it(cls, params, seed):
     # Noisy records of a linear system: the networks' restarts fit the noise
-    # and validate worse than the linear output-error model (measured).
+    # and validate worse than the linear output-error model (measured; on
+    # seeds 20-31 the linear model's refinement validated better on 3 (TDL)
+    # and 5 (ISSM) of 12 by the validation's noise, at test errors 0.97-1.8
+    # times the linear model's).
     records = (_linear_record(seed + k) for k in range(3))
     (X, y, _), (Xv, yv, _), (Xt, _, yt) = records
     common = dict(max_iter=30, random_state=0, **params)
@@ -86,9 +89,32 @@ def test_issm_linear_candidate_comes_from_its_better_linear_start(monkeypatch):
     assert [(k, start) for k, start, _ in trained] == [(0, "subspace"), (2, "arx")]
     # The records start at rest: no burn-in, the score is the training's.
     assert net.linear_score_ == pytest.approx(-trained[1][2], rel=1e-9)
-    assert net.selected_ == "linear"
-    # The returned model reports the start it was trained from.
+    # The linear model is returned, or its refinement (which validated
+    # better here); either reports the start it was trained from.
+    assert net.selected_ == "linear" or net.best_restart_ == net.refined_restart_
     assert net.init_ == "arx"
+
+
+@pytest.mark.parametrize("cls", [TDLRegressor, ISSMRegressor])
+def test_linear_model_is_refined_from_where_its_training_ended(cls):
+    # The last run starts at the trained linear model (network output
+    # silent) and runs the final stage only: its first validation loss is
+    # the linear model's score, and it can only improve on it.
+    (X, y, _), (Xv, yv, _) = (_linear_record(s) for s in (0, 1))
+    y, yv = np.tanh(2 * y), np.tanh(2 * yv)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "The linear model of", UserWarning)
+        net = cls(n_init=2, max_iter=30, random_state=0).fit(X, y, X_val=Xv, y_val=yv)
+    k = net.refined_restart_
+    assert k == net.n_restarts_ - 1 == len(net.training_history_) - 1
+    (stage,) = net.training_history_[k]
+    whole = max(net.training_history_[:k], key=len)  # a restart halving kept
+    assert stage.segment == whole[-1].segment  # the free run
+    assert stage.validation[0] == pytest.approx(-net.linear_score_, rel=1e-9)
+    assert net.restart_scores_[k] >= net.linear_score_
+    # A linear network has no linear model to refine.
+    linear = cls(hidden_layer_sizes=(), n_init=2, max_iter=5, random_state=0)
+    assert linear.fit(X, y, X_val=Xv, y_val=yv).refined_restart_ is None
 
 
 def test_network_that_beats_the_linear_model_is_kept():
@@ -142,7 +168,9 @@ def test_the_choice_among_restarts_is_explained_by_fitted_attributes(monkeypatch
 
     monkeypatch.setattr(_selection, "bounded_beyond_range", unbounded_winner)
     held = TDLRegressor(**params).fit(X, y, X_val=Xv, y_val=yv)
-    assert held.restart_bounded_.tolist() == [k != winner for k in range(3)]
+    assert held.restart_bounded_.tolist() == [
+        k != winner for k in range(held.n_restarts_)
+    ]
     np.testing.assert_array_equal(held.restart_scores_, net.restart_scores_)
     assert held.best_restart_ != winner
     assert (held.selected_, held.best_restart_) == _replayed_choice(held)

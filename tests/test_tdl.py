@@ -413,7 +413,9 @@ def test_same_random_state_same_model_and_restarts_in_parallel():
     a = _small(n_init=2, random_state=5).fit(Xs, ys)
     b = _small(n_init=2, random_state=5, n_jobs=2).fit(Xs, ys)
     np.testing.assert_array_equal(a.coefs_, b.coefs_)
-    assert a.restart_scores_.shape == (2,)
+    # The two restarts and the refinement of the linear model.
+    assert a.restart_scores_.shape == (3,)
+    np.testing.assert_array_equal(a.restart_scores_, b.restart_scores_)
 
 
 def test_grid_search_over_hidden_nodes_by_experiment():
