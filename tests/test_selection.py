@@ -117,6 +117,41 @@ def test_linear_model_is_refined_from_where_its_training_ended(cls):
     assert linear.fit(X, y, X_val=Xv, y_val=yv).refined_restart_ is None
 
 
+def test_refinement_reports_the_start_of_its_linear_model(monkeypatch):
+    # Noisy records: the ISSM's restarts start from a subspace and an ARX
+    # fit. The linear model trained from the ARX start is made to lose, so
+    # the one refined is the subspace start's, and so is the returned start.
+    from dataclasses import replace
+
+    from sysid_nn import _selection
+
+    (X, y, _), (Xv, yv, _) = (_linear_record(21 + k) for k in range(2))
+    fit_one = ISSMRegressor._fit_one
+
+    def spy(self, train, val, restart, stop):
+        restart_, run = fit_one(self, train, val, restart, stop)
+        start = self._linear_starts[self._start_of(restart.k)][0]
+        if not self._hidden_layers() and start == "arx":
+            run = replace(run, score=np.inf, val_loss=np.inf)
+        return restart_, run
+
+    choose = _selection.choose
+
+    def refinement_wins(est, train, val, runs, linear):
+        bounded = choose(est, train, val, runs, linear)[2]
+        return runs[-1], "restart", bounded
+
+    monkeypatch.setattr(ISSMRegressor, "_fit_one", spy)
+    monkeypatch.setattr(_selection, "choose", refinement_wins)
+    net = ISSMRegressor(n_init=2, max_iter=30, random_state=0)
+    net.fit(X, y, X_val=Xv, y_val=yv)
+    assert net.best_restart_ == net.refined_restart_ == 3
+    assert net.init_ == "subspace"
+    ref = ISSMRegressor(init="subspace", n_init=1, max_iter=1)
+    ref.fit(X, y, X_val=Xv, y_val=yv)
+    np.testing.assert_array_equal(net.linear_model_.A, ref.linear_model_.A)
+
+
 def test_network_that_beats_the_linear_model_is_kept():
     (X, y, _), (Xv, yv, _) = (_linear_record(s, poles=(-1.2, 0.5)) for s in (0, 1))
     # A nonlinear system: the network wins.
