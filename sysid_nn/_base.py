@@ -63,7 +63,12 @@ from sysid_nn._state_estimation import (
     fit_initial_condition,
     rest_check,
 )
-from sysid_nn._training import _single_threaded_blas, fit_stages, train
+from sysid_nn._training import (
+    _REFINE_BUDGET,
+    _single_threaded_blas,
+    fit_stages,
+    train,
+)
 
 __all__ = ["DivergenceWarning"]
 
@@ -328,9 +333,12 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
                 stacklevel=user_stacklevel(),
             )
         if not chosen.converged:
+            budget = f"max_iter={self.max_iter}"
+            if result.chosen is not None and result.chosen == result.refined:
+                budget = f"{_REFINE_BUDGET} times max_iter={self.max_iter}"
             warnings.warn(
-                f"{type(self).__name__} stopped after max_iter={self.max_iter} "
-                "iterations of its last training stage before reaching tol="
+                f"{type(self).__name__} stopped after {budget} iterations of "
+                "its last training stage before reaching tol="
                 f"{self.tol}. Increase max_iter or loosen tol.",
                 ConvergenceWarning,
                 stacklevel=user_stacklevel(),

@@ -117,6 +117,18 @@ def test_linear_model_is_refined_from_where_its_training_ended(cls):
     assert linear.fit(X, y, X_val=Xv, y_val=yv).refined_restart_ is None
 
 
+def test_refinement_has_a_budget_of_several_last_stages():
+    from sysid_nn._training import _REFINE_BUDGET
+
+    (X, y, _), (Xv, yv, _) = (_linear_record(s) for s in (0, 1))
+    y, yv = np.tanh(2 * y), np.tanh(2 * yv)
+    # tol=0: every stage runs to its budget.
+    net = TDLRegressor(n_init=2, max_iter=3, tol=0.0, random_state=0)
+    net.fit(X, y, X_val=Xv, y_val=yv)
+    last = [history[-1].n_iter for history in net.training_history_]
+    assert last[net.refined_restart_] == _REFINE_BUDGET * 3 > 3 >= max(last[:-1])
+
+
 def test_refinement_reports_the_start_of_its_linear_model(monkeypatch):
     # Noisy records: the ISSM's restarts start from a subspace and an ARX
     # fit. The linear model trained from the ARX start is made to lose, so
