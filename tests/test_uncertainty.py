@@ -136,19 +136,26 @@ def test_long_records_use_the_accumulated_normal_matrix(monkeypatch):
 def _finite_difference_std(model, run, step=1e-4):
     """Propagate ``coefs_covariance_`` by central differences of ``run``.
 
-    ``var(f) = sum_k lam_k (f(w + h v_k) - f(w - h v_k))^2 / (2 h)^2`` over the
-    eigenpairs ``(lam_k, v_k)`` of the covariance.
+    ``var(f) = sum_k lam_k (f(w + h v_k) - f(w - h v_k))^2 / (2 h)^2`` over
+    ``C = sum_k lam_k v_k v_k^T``, factored on ``C`` scaled to a unit
+    diagonal: a network with large output and small hidden weights (the
+    refinement of a linear model) has a covariance of condition 1e17, whose
+    smallest eigenvalues an unscaled factoring drops, and they matter.
     """
     w0 = model.coefs_.copy()
-    lam, V = np.linalg.eigh(model.coefs_covariance_)
+    cov = model.coefs_covariance_
+    d = np.sqrt(np.diag(cov))
+    lam, V = np.linalg.eigh(cov / np.outer(d, d))
     var = 0.0
     try:
-        for k in np.flatnonzero(lam > 1e-14 * lam.max()):
-            model.coefs_ = w0 + step * V[:, k]
+        for k in np.flatnonzero(lam > len(lam) * np.finfo(float).eps * lam.max()):
+            v = d * V[:, k]
+            norm = np.linalg.norm(v)
+            model.coefs_ = w0 + step * v / norm
             plus = run()
-            model.coefs_ = w0 - step * V[:, k]
+            model.coefs_ = w0 - step * v / norm
             minus = run()
-            var = var + lam[k] * ((plus - minus) / (2 * step)) ** 2
+            var = var + lam[k] * norm**2 * ((plus - minus) / (2 * step)) ** 2
     finally:
         model.coefs_ = w0
     return np.sqrt(var)
