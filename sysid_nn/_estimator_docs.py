@@ -18,7 +18,8 @@ solver : {"lm", "lbfgs", "slsqp"}, default="lm"
     paper, with the adjoint gradient.
 max_iter : int, default=150
     Iterations of the last training stage; the one-step and each shooting
-    stage get 2/3 and 4/15 of it.
+    stage get 2/3 and 4/15 of it, the refinement of the linear model
+    (``refined_restart_``) five times it.
 tol : float, default=1e-8
     Relative tolerance of the solver: a stage ends when the loss changes
     by less than ``tol`` times its value (or the gradient or step become
@@ -97,7 +98,7 @@ refined_restart_ : int or None
     Index in ``restart_scores_`` of the restart that refines the trained
     linear model (the last; None where the linear model is no candidate):
     it starts at the linear model with small hidden weights and runs the
-    final stage of the schedule only.
+    final stage of the schedule only, with five times ``max_iter``.
 best_stage_ : int
     Training stage in which the chosen weights were seen (an index into
     ``training_history_[best_restart_]``).
