@@ -299,14 +299,14 @@ def refine_linear(est, train_data, val, linear, k: int, seed: int) -> _Run:
     rng = np.random.RandomState(seed)
     w = linear.w.copy()
     drawn = np.zeros_like(w)
-    est._layout().draw_weights(drawn, rng, est.activation)
-    for layer in est._layout().layers[:-1]:
+    layout = est._layout()
+    layout.draw_weights(drawn, rng, est.activation)
+    for layer in layout.layers[:-1]:
         w[layer.weights] = _REFINE_SCALE * drawn[layer.weights]
     refiner = copy.copy(est)  # its own budget, the rest shared
     refiner.max_iter = _REFINE_BUDGET * est.max_iter
     n_stages = len(refiner._stages())
     restart = _Restart(k, seed, w=w, rng=rng, stage=n_stages - 1)
-    restart.tracker = _Tracker(refiner, val, refiner._final_segment(), w)
     return refiner._fit_one(train_data, val, restart, n_stages)[1]
 
 
@@ -380,6 +380,7 @@ def fit_stages(est, train_data, val, restart, stop):
     if restart.w is None:
         restart.rng = np.random.RandomState(restart.seed)
         restart.w = est._initial_params(restart.rng)
+    if restart.tracker is None:  # a restart's start (its own, or given)
         restart.tracker = _Tracker(est, val, final_seg, restart.w)
     tracker, w, k = restart.tracker, restart.w, restart.k
     tracker.est = est  # not the copy a worker process unpickled
