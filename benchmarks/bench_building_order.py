@@ -6,7 +6,7 @@ linear (``alpha=1``) and with its default hysteresis, with and without
 measurement noise, takes the absolute floor accelerations (or the floor
 displacements) as outputs and the ground acceleration as input, and prints
 the singular values of the subspace step's projected block-Hankel matrix
-(the projection that ``sysid_nn._subspace.subspace_model`` factorises to
+(the projection that ``sysid_nn._engine._subspace.subspace_model`` factorises to
 choose its states). The order shows as the gap after the ``2 n``-th value:
 the table gives the largest ratio ``s_k / s_{k+1}`` and where it falls, and
 the ratio at ``k = 2 n``. Writes ``results_building_order.md`` next to itself.
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from sysid_nn import ShearBuilding
-from sysid_nn._subspace import HORIZON, _windows
+from sysid_nn._engine._subspace import HORIZON, _windows
 
 HERE = Path(__file__).resolve().parent
 MD = HERE / "results_building_order.md"

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from sysid_nn import HystereticOscillator, ISSMRegressor
-from sysid_nn._data import _FREE_RUN
+from sysid_nn._records._data import _FREE_RUN
 from sysid_nn.study import PAPER_ISSM
 
 HERE = Path(__file__).resolve().parent

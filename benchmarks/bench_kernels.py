@@ -40,7 +40,7 @@ from _rtrl_reference import forward, forward_jacobian  # noqa: E402
 from test_tdl import _twin_run  # noqa: E402 - the NumPy twin lives with the tests
 
 from sysid_nn import HystereticOscillator, TDLRegressor  # noqa: E402
-from sysid_nn._data import _FREE_RUN  # noqa: E402
+from sysid_nn._records._data import _FREE_RUN  # noqa: E402
 from sysid_nn.study import PAPER_TDL  # noqa: E402
 
 #: Repeats of the comparison with the reference kernel: its spread shows how

@@ -115,7 +115,7 @@ def _timed(fn, clock: dict, key: str):
 
 def _instrument(est, log: list):
     """Record per stage: iterations, time, and its split into evaluations."""
-    from sysid_nn import _solvers, _training
+    from sysid_nn._engine import _solvers, _training
 
     clock = {"resid": 0.0, "n_resid": 0, "normal": 0.0, "n_normal": 0}
     clock.update(track=0.0, n_track=0)
@@ -221,7 +221,7 @@ def _costs(sizes) -> dict:
     the record's start: the per-iteration cost, free of the machine's load.
     """
     from sysid_nn import ISSMRegressor, TDLRegressor
-    from sysid_nn._solvers import _Objective
+    from sysid_nn._engine._solvers import _Objective
 
     out = {"kind": "costs", "case": "costs", "rows": []}
     X, y = _records(str(max(sizes)))
@@ -266,7 +266,7 @@ def _write_csv(n: int, path: Path) -> None:
 
 def _csv_worker(n: str, path: str, options: str) -> dict:
     """``sysid-nn fit`` on ``path`` in this process: time per stage, peak memory."""
-    from sysid_nn import _uncertainty, cli
+    from sysid_nn._analysis import _uncertainty, cli
 
     labels = ("read CSV", "fit (restarts, selection, covariance)",
               "of which: covariance of the bands", "score held-out part",

@@ -16,18 +16,23 @@ from __future__ import annotations
 
 import importlib
 
+from sysid_nn import _moved
+
 __version__ = "0.1.0.dev0"
+
+# Models pickled before the private modules moved into groups still load.
+_moved.install()
 
 # Names are resolved on first access so that ``import sysid_nn`` stays light
 # (no numba compilation, no matplotlib) until a class is actually used.
 _LAZY = {
     "HystereticOscillator": "sysid_nn.oscillator",
     "ShearBuilding": "sysid_nn.building",
-    "TDLRegressor": "sysid_nn._tdl",
-    "ISSMRegressor": "sysid_nn._issm",
+    "TDLRegressor": "sysid_nn._estimators._tdl",
+    "ISSMRegressor": "sysid_nn._estimators._issm",
     "DivergenceWarning": "sysid_nn._exceptions",
     "InconsistentVersionWarning": "sysid_nn._exceptions",
-    "UnstablePredictorWarning": "sysid_nn._issm",
+    "UnstablePredictorWarning": "sysid_nn._estimators._issm",
     "load_model": "sysid_nn._saved",
 }
 

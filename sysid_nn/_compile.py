@@ -19,8 +19,8 @@ import warnings
 import numba
 from numba.core import config as _numba_config
 
+from sysid_nn._engine._progress import track
 from sysid_nn._kernels import cache_dir, sources_digest
-from sysid_nn._progress import track
 
 
 def _marker() -> str:

@@ -22,7 +22,7 @@ from sklearn.utils import Bunch, check_random_state
 
 from sysid_nn import excitation as _exc
 from sysid_nn._kernels._building import simulate_shear_building
-from sysid_nn._validation import (
+from sysid_nn._records._validation import (
     InvalidArgumentError,
     check_finite_array,
     check_in_range,

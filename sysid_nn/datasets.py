@@ -42,7 +42,7 @@ import scipy.signal
 from sklearn.utils import Bunch, check_random_state
 
 from sysid_nn import excitation as _exc
-from sysid_nn._validation import check_positive, check_positive_int
+from sysid_nn._records._validation import check_positive, check_positive_int
 from sysid_nn.oscillator import HystereticOscillator
 
 __all__ = [

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike
 from sklearn.utils import check_random_state
 
 from sysid_nn._docstrings import fill_doc
-from sysid_nn._validation import (
+from sysid_nn._records._validation import (
     check_finite_array,
     check_positive,
     check_positive_int,

@@ -21,9 +21,8 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from sysid_nn._data import is_sequence_list
 from sysid_nn._docstrings import fill_doc
-from sysid_nn._validation import check_same_width
+from sysid_nn._records._sequences import as_sequence_list, check_paired
 
 __all__ = [
     "ErrorStatistics",
@@ -39,106 +38,11 @@ __all__ = [
 MultiOutput = Literal["uniform_average", "raw_values"]
 
 
-# ----------------------------------------------------------------------------
-# Input handling shared with sysid_nn.residuals
-# ----------------------------------------------------------------------------
-def _is_sequence_list(data: Any) -> bool:
-    """Whether ``data`` is a list of sequences: the estimators' rule."""
-    return is_sequence_list(data)
-
-
-def _as_sequence_list(
-    data: Any, name: str, *, allow_nan: bool = True
-) -> tuple[list[np.ndarray], bool]:
-    """Turn an array or a list of arrays into a list of 2-D float arrays.
-
-    Parameters
-    ----------
-    data : array-like or list of array-like
-        One sequence, shape ``(n_samples,)`` or ``(n_samples, n_columns)``
-        (pandas objects accepted), or a list/tuple of such sequences. A list
-        whose items are all numbers is one 1-D sequence, a list of lists of
-        numbers one 2-D array (as the estimators read them).
-    name : str
-        Argument name used in error messages.
-    allow_nan : bool, default=True
-        If False, NaN raises a ``ValueError`` giving sequence and sample.
-
-    Returns
-    -------
-    sequences : list of ndarray of shape (n_samples_j, n_columns)
-        Float64 copies-or-views, one per sequence, all with the same number
-        of columns.
-    is_list : bool
-        Whether ``data`` was a list of sequences (outputs should mirror it).
-    """
-    is_list = _is_sequence_list(data)
-    items = list(data) if is_list else [data]
-    if is_list and not items:
-        raise ValueError(f"{name} is an empty list; pass at least one sequence.")
-    sequences = []
-    for j, item in enumerate(items):
-        where = f"{name}[{j}]" if is_list else name
-        try:
-            arr = np.asarray(item, dtype=float)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(
-                f"{where} must be numeric array-like; could not convert it to "
-                f"float ({exc})."
-            ) from exc
-        if arr.ndim == 1:
-            arr = arr[:, None]
-        if arr.ndim != 2:
-            raise ValueError(
-                f"{where} must be 1-D (n_samples,) or 2-D (n_samples, n_columns); "
-                f"got shape {arr.shape}. Pass several experiments as a list of "
-                "arrays instead of stacking them."
-            )
-        if arr.shape[0] == 0:
-            raise ValueError(f"{where} has no samples; pass a non-empty sequence.")
-        if np.isinf(arr).any():
-            raise ValueError(f"{where} contains infinite values; remove or fix them.")
-        if not allow_nan:
-            _raise_on_nan(arr, where)
-        sequences.append(arr)
-    check_same_width(sequences, name)
-    return sequences, is_list
-
-
-def _raise_on_nan(arr: np.ndarray, where: str) -> None:
-    """Raise a ValueError naming the first NaN sample of ``arr``."""
-    bad = np.flatnonzero(np.isnan(arr).any(axis=1))
-    if bad.size:
-        raise ValueError(
-            f"{where} contain NaN at sample {bad[0]} ({bad.size} samples in all), "
-            "e.g. from a diverged free run; test only finite residuals (slice "
-            "the sequence before the divergence or drop that realisation)."
-        )
-
-
-def _check_paired(
-    a: list[np.ndarray], b: list[np.ndarray], name_a: str, name_b: str
-) -> None:
-    """Check that two sequence lists pair up: same count and lengths."""
-    if len(a) != len(b):
-        raise ValueError(
-            f"{name_a} has {len(a)} sequences but {name_b} has {len(b)}; "
-            "pass the same number of sequences."
-        )
-    for j, (x, y) in enumerate(zip(a, b, strict=True)):
-        if x.shape[0] != y.shape[0]:
-            where = f" (sequence {j})" if len(a) > 1 else ""
-            raise ValueError(
-                f"{name_a} has {x.shape[0]} samples but {name_b} has "
-                f"{y.shape[0]}{where}; they must have equal lengths."
-            )
-
-
 def _pooled_pair(y_true: Any, y_pred: Any) -> tuple[np.ndarray, np.ndarray]:
     """Validate ``y_true``/``y_pred`` and stack all sequences sample-wise."""
-    true, _ = _as_sequence_list(y_true, "y_true")
-    pred, _ = _as_sequence_list(y_pred, "y_pred")
-    _check_paired(true, pred, "y_true", "y_pred")
+    true, _ = as_sequence_list(y_true, "y_true")
+    pred, _ = as_sequence_list(y_pred, "y_pred")
+    check_paired(true, pred, "y_true", "y_pred")
     if true[0].shape[1] != pred[0].shape[1]:
         raise ValueError(
             f"y_true has {true[0].shape[1]} outputs but y_pred has "
@@ -481,8 +385,8 @@ class _SequenceScorer:
         else:
             y_model = estimator.predict(X, y, horizon=self.horizon)
         func, sign = _METRICS[self.metric]
-        y_list, _ = _as_sequence_list(y, "y")
-        model_list, _ = _as_sequence_list(y_model, "model output")
+        y_list, _ = as_sequence_list(y, "y")
+        model_list, _ = as_sequence_list(y_model, "model output")
         # A 1-D model output for a single-output y is the same thing.
         score = sign * func(y_list, model_list)
         return float(score) if np.isfinite(score) else self.divergence_score

@@ -21,7 +21,7 @@ from sklearn.utils import Bunch, check_random_state
 
 from sysid_nn import excitation as _exc
 from sysid_nn._kernels._oscillator import hysteretic_state, simulate_bouc_wen
-from sysid_nn._validation import (
+from sysid_nn._records._validation import (
     check_finite_array,
     check_in_range,
     check_positive,

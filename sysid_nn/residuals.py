@@ -49,7 +49,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from sysid_nn._correlation_tests import (
+from sysid_nn._analysis._correlation_tests import (
     CorrelationTest,
     CrossCorrelationResult,
     NonlinearTestResult,
@@ -60,7 +60,8 @@ from sysid_nn._correlation_tests import (
     nonlinear_correlation_tests,
     whiteness_test,
 )
-from sysid_nn.metrics import _as_sequence_list, _check_paired, _is_sequence_list
+from sysid_nn._records._data import is_sequence_list
+from sysid_nn._records._sequences import as_sequence_list, check_paired
 
 __all__ = [
     "CorrelationTest",
@@ -340,14 +341,14 @@ def analyze_residuals(
         raise ValueError(f"mode must be 'prediction' or 'simulation'; got {mode!r}.")
     if isinstance(skip, bool) or not isinstance(skip, (int, np.integer)) or skip < 0:
         raise ValueError(f"skip must be an integer >= 0; got {skip!r}.")
-    X_seqs, is_list = _as_sequence_list(X, "X")
-    y_seqs, y_is_list = _as_sequence_list(y, "y")
+    X_seqs, is_list = as_sequence_list(X, "X")
+    y_seqs, y_is_list = as_sequence_list(y, "y")
     if is_list != y_is_list:
         raise ValueError(
             "X and y must both be arrays or both be lists of sequences; got "
             f"{type(X).__name__} and {type(y).__name__}."
         )
-    _check_paired(X_seqs, y_seqs, "X", "y")
+    check_paired(X_seqs, y_seqs, "X", "y")
     shortest = min(v.shape[0] for v in y_seqs)
     if skip >= shortest:
         raise ValueError(
@@ -360,12 +361,12 @@ def analyze_residuals(
         model = estimator.predict(X, y, horizon=horizon)
     else:
         model = estimator.simulate(X)
-    if _is_sequence_list(model) != is_list:
+    if is_sequence_list(model) != is_list:
         raise ValueError(
             f"The estimator's {mode} output is not shaped like y (array vs list)."
         )
-    m_seqs, _ = _as_sequence_list(model, f"{mode} output")
-    _check_paired(y_seqs, m_seqs, "y", f"{mode} output")
+    m_seqs, _ = as_sequence_list(model, f"{mode} output")
+    check_paired(y_seqs, m_seqs, "y", f"{mode} output")
     res_seqs = [a - b for a, b in zip(y_seqs, m_seqs, strict=True)]
 
     # Mirror y: 1-D in, 1-D out.

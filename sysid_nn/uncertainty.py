@@ -27,7 +27,7 @@ from scipy.stats import norm
 from sklearn.base import clone
 from sklearn.utils import check_random_state
 
-from sysid_nn._data import is_sequence_list
+from sysid_nn._records._data import is_sequence_list
 
 __all__ = ["ensemble_std", "interval_coverage", "normal_interval"]
 

@@ -448,7 +448,7 @@ def test_progress_survives_parallel_restarts(files, tmp_path, capsys):
 
 def test_progress_bar_on_a_terminal(monkeypatch):
     from sysid_nn import TDLRegressor
-    from sysid_nn._progress import report_stage
+    from sysid_nn._engine._progress import report_stage
 
     class Terminal(io.StringIO):
         def isatty(self):
@@ -474,7 +474,7 @@ def test_progress_lines_within_a_long_stage(monkeypatch, capsys):
     rec = HystereticOscillator().generate(1, 600, random_state=0)
     X, y = rec.excitation[0][:, None], rec.displacement[0]
     est = TDLRegressor(n_init=1, max_iter=6, shooting_segments=(), random_state=0)
-    monkeypatch.setattr("sysid_nn._progress.STEP_SECONDS", 0.0)
+    monkeypatch.setattr("sysid_nn._engine._progress.STEP_SECONDS", 0.0)
     est.set_params(verbose=1).fit(X, y)
     out = capsys.readouterr().err.splitlines()
     # The restart's lines, before the linear model's refinement starts.
@@ -485,11 +485,11 @@ def test_progress_lines_within_a_long_stage(monkeypatch, capsys):
     # One line per accepted step when every step is late enough, counted on.
     assert steps == list(range(1, len(steps) + 1)) and len(steps) >= 2
     assert all("best validation" in x for x in lines)
-    monkeypatch.setattr("sysid_nn._progress.STEP_SECONDS", 3600.0)
+    monkeypatch.setattr("sysid_nn._engine._progress.STEP_SECONDS", 3600.0)
     est.fit(X, y)
     assert "training:" not in capsys.readouterr().err
     est.set_params(verbose=0)
-    monkeypatch.setattr("sysid_nn._progress.STEP_SECONDS", 0.0)
+    monkeypatch.setattr("sysid_nn._engine._progress.STEP_SECONDS", 0.0)
     est.fit(X, y)
     assert capsys.readouterr().err == ""
 

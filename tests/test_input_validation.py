@@ -13,7 +13,7 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.utils.estimator_checks import check_dataframe_column_names_consistency
 
 from sysid_nn import ISSMRegressor, TDLRegressor
-from sysid_nn._issm import UnstablePredictorWarning
+from sysid_nn._estimators._issm import UnstablePredictorWarning
 
 SMALL = {"hidden_layer_sizes": (3,), "n_init": 1, "max_iter": 6, "random_state": 0}
 

@@ -18,10 +18,10 @@ from sklearn.model_selection import GridSearchCV, KFold
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from sysid_nn import DivergenceWarning, ISSMRegressor
-from sysid_nn._data import _FREE_RUN
-from sysid_nn._innovation import predictor_radius, refit_innovations
-from sysid_nn._issm import UnstablePredictorWarning
-from sysid_nn._issm_realisation import realise_tdl
+from sysid_nn._engine._innovation import predictor_radius, refit_innovations
+from sysid_nn._estimators._issm import UnstablePredictorWarning
+from sysid_nn._estimators._issm_realisation import realise_tdl
+from sysid_nn._records._data import _FREE_RUN
 
 
 # --------------------------------------------------------------------------
@@ -689,7 +689,7 @@ def test_subspace_start_has_a_stable_one_step_predictor():
     # On a clean record of the hysteretic oscillator the regression's gain
     # gives an unstable predictor; the start takes the Riccati gain then.
     from sysid_nn import HystereticOscillator
-    from sysid_nn._subspace import kalman_gain
+    from sysid_nn._engine._subspace import kalman_gain
 
     data = HystereticOscillator().generate(1, n_samples=2000, random_state=2024)
     u, y = data.excitation[0][:, None], data.displacement[0]

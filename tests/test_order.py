@@ -16,8 +16,8 @@ from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, KFold
 
 from sysid_nn import HystereticOscillator, ISSMRegressor, ShearBuilding, TDLRegressor
-from sysid_nn._issm_start import lags_per_output, order_lags
-from sysid_nn._order import (
+from sysid_nn._engine._issm_start import lags_per_output, order_lags
+from sysid_nn._engine._order import (
     ORDER_FLOOR,
     ORDER_TOLERANCE,
     SAMPLES_PER_WEIGHT,
@@ -58,7 +58,7 @@ def test_auto_order_finds_the_systems_order(cubic):
     scores = dict(zip(sel.orders, sel.scores, strict=True))
     assert scores[3] > 2 * scores[4]
     assert scores[4] <= (1 + ORDER_TOLERANCE) * np.min(sel.scores) + ORDER_FLOOR
-    # The network doubles the linear order (see sysid_nn._order).
+    # The network doubles the linear order (see sysid_nn._engine._order).
     assert model.n_states_ == sel.n_states == 8
     assert np.all(np.diff(sel.singular_values) <= 0)
 

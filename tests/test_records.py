@@ -10,7 +10,7 @@ from scipy.signal import lfilter
 from sklearn.exceptions import ConvergenceWarning
 
 from sysid_nn import ISSMRegressor, TDLRegressor
-from sysid_nn._record_checks import padded_length, samples_per_period
+from sysid_nn._records._record_checks import padded_length, samples_per_period
 
 
 def _oscillator_records(n_records=3, n=1500, seed=0):

@@ -9,7 +9,7 @@ import pytest
 from sklearn.exceptions import ConvergenceWarning
 
 from sysid_nn import ISSMRegressor, TDLRegressor, _schedule
-from sysid_nn._data import _FREE_RUN
+from sysid_nn._records._data import _FREE_RUN
 
 
 def _records(n=3, length=400, seed=0):
@@ -116,7 +116,7 @@ def test_subset_is_reproducible_from_the_random_state(small_subsets):
 
 
 def test_stages_before_the_free_run_see_the_subset(small_subsets, monkeypatch):
-    from sysid_nn import _selection, _training
+    from sysid_nn._engine import _selection, _training
 
     Xs, ys = _records(n=4)
     solve = _training._SOLVERS["lm"]
@@ -148,7 +148,7 @@ def test_fits_on_subsets_are_reproducible(small_subsets):
 
 
 def test_penalty_stays_relative_to_the_whole_record(small_subsets, monkeypatch):
-    from sysid_nn import _training
+    from sysid_nn._engine import _training
 
     Xs, ys = _records(n=4)
     solve = _training._SOLVERS["lm"]
@@ -267,7 +267,7 @@ def test_halving_without_validation_ranks_by_the_training_free_run():
 def test_issm_restarts_are_halved_too(small_subsets, monkeypatch):
     # ... but its stages see the whole records: its unmeasured states carry
     # over between segments, so a block of them is not a sum of segments.
-    from sysid_nn import _training
+    from sysid_nn._engine import _training
 
     solve = _training._SOLVERS["lm"]
     rows = []

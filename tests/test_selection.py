@@ -118,7 +118,7 @@ def test_linear_model_is_refined_from_where_its_training_ended(cls):
 
 
 def test_refinement_has_a_budget_of_several_last_stages():
-    from sysid_nn._training import _REFINE_BUDGET
+    from sysid_nn._engine._training import _REFINE_BUDGET
 
     (X, y, _), (Xv, yv, _) = (_linear_record(s) for s in (0, 1))
     y, yv = np.tanh(2 * y), np.tanh(2 * yv)
@@ -135,7 +135,7 @@ def test_refinement_reports_the_start_of_its_linear_model(monkeypatch):
     # the one refined is the subspace start's, and so is the returned start.
     from dataclasses import replace
 
-    from sysid_nn import _selection
+    from sysid_nn._engine import _selection
 
     (X, y, _), (Xv, yv, _) = (_linear_record(21 + k) for k in range(2))
     fit_one = ISSMRegressor._fit_one
@@ -195,7 +195,7 @@ def _replayed_choice(net):
 def test_the_choice_among_restarts_is_explained_by_fitted_attributes(monkeypatch):
     # Which restarts were bounded at twice the training amplitude, their
     # training losses and the linear model's: the choice follows from them.
-    from sysid_nn import _selection
+    from sysid_nn._engine import _selection
 
     (X, y, _), (Xv, yv, _) = (_linear_record(s) for s in (0, 1))
     y, yv = np.tanh(2 * y), np.tanh(2 * yv)
@@ -239,8 +239,8 @@ def test_validation_record_from_rest_judges_as_the_tail_within_the_record():
 
 
 def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
-    from sysid_nn._selection import bounded_beyond_range, choose
-    from sysid_nn._training import _Run
+    from sysid_nn._engine._selection import bounded_beyond_range, choose
+    from sysid_nn._engine._training import _Run
 
     X, y, _ = _linear_record(0, noise=0.0)
     y = np.tanh(y)
@@ -282,8 +282,8 @@ def test_restart_that_fits_its_training_records_worse_than_linear_is_not_chosen(
     # On the Cascaded Tanks benchmark restarts whose free run on the training
     # record was 1.2-4 times the linear model's validated up to 24 % better
     # on the 205 validation samples, and tested 1.5-3 times worse.
-    from sysid_nn._selection import LinearCandidate, choose
-    from sysid_nn._training import _Run
+    from sysid_nn._engine._selection import LinearCandidate, choose
+    from sysid_nn._engine._training import _Run
 
     X, y, _ = _linear_record(0, noise=0.0)
     model = TDLRegressor(
@@ -366,7 +366,7 @@ def test_validation_record_of_an_integrating_plant_starts_from_a_fitted_state():
 
 
 def test_burn_in_only_for_records_that_start_in_motion():
-    from sysid_nn._selection import burn_in
+    from sysid_nn._engine._selection import burn_in
 
     X, y, _ = _linear_record(3, n=1000, noise=0.01, poles=(-1.8, 0.85))
     model = TDLRegressor(

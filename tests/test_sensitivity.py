@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from sysid_nn import HystereticOscillator
-from sysid_nn._sensitivity import NUDGE, chaos_hint, free_run_divergence
+from sysid_nn._analysis._sensitivity import NUDGE, chaos_hint, free_run_divergence
 
 
 class DrivenMap:
@@ -48,7 +48,7 @@ def test_a_diverged_run_is_no_evidence(X):
 
 
 def test_fit_and_validate_print_the_hint(tmp_path, capsys, monkeypatch):
-    from sysid_nn import _sensitivity
+    from sysid_nn._analysis import _sensitivity
     from sysid_nn.cli import main
 
     rec = HystereticOscillator(r0=0.05).generate(

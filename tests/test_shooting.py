@@ -8,8 +8,8 @@ from scipy.signal import lfilter
 from sklearn.exceptions import ConvergenceWarning
 
 from sysid_nn import TDLRegressor
-from sysid_nn._shooting import _FreeStateObjective, _segment
-from sysid_nn._state_estimation import lowpass, noise_band
+from sysid_nn._engine._shooting import _FreeStateObjective, _segment
+from sysid_nn._engine._state_estimation import lowpass, noise_band
 
 
 def _system(n, seed):

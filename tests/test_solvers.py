@@ -12,9 +12,9 @@ from scipy.signal import lfilter
 from sklearn.exceptions import ConvergenceWarning
 
 from sysid_nn import ISSMRegressor, TDLRegressor, _selection
-from sysid_nn._data import _FREE_RUN
-from sysid_nn._innovation import RestrictedObjective
-from sysid_nn._solvers import _STALL_IMPROVEMENT, _Objective, _solve_lm
+from sysid_nn._engine._innovation import RestrictedObjective
+from sysid_nn._engine._solvers import _STALL_IMPROVEMENT, _Objective, _solve_lm
+from sysid_nn._records._data import _FREE_RUN
 
 
 def _fitted(kind, n_outputs=1, length=300, n_seq=2, **params):

@@ -19,7 +19,7 @@ from sklearn.preprocessing import FunctionTransformer
 from sklearn.utils.estimator_checks import parametrize_with_checks
 
 from sysid_nn import DivergenceWarning, TDLRegressor, _selection
-from sysid_nn._data import _FREE_RUN
+from sysid_nn._records._data import _FREE_RUN
 
 ROW_ORDER_CHECKS = {
     "check_methods_subset_invariance": (
@@ -211,7 +211,7 @@ def test_horizon_predictor_is_sliding():
     a, h = data.starts[1], data.h
     t = a + h + 20
     sub_starts = np.array([0, h + k])
-    from sysid_nn._data import _Data
+    from sysid_nn._records._data import _Data
 
     sub = _Data(
         Y=data.Y[t - k + 1 - h : t + 1].copy(),
@@ -573,7 +573,7 @@ def test_last_stage_gets_its_own_patience():
     original = model._fit_stages
 
     def spy(train, val, restart, stop):
-        from sysid_nn import _training
+        from sysid_nn._engine import _training
 
         solve = _training._SOLVERS["lm"]
 
@@ -599,7 +599,7 @@ def test_last_stage_gets_its_own_patience():
 def test_stages_before_the_last_stop_when_their_cost_stalls(monkeypatch):
     # Every stage but the free run gets the stall rule; the free run stops
     # by tol, its budget or the validation patience alone.
-    from sysid_nn import _selection, _training
+    from sysid_nn._engine import _selection, _training
 
     Xs, ys = _records(n=3, length=300, seed=5)
     solve = _training._SOLVERS["lm"]

@@ -17,7 +17,7 @@ from scipy.signal import lfilter
 from sklearn.exceptions import ConvergenceWarning
 
 from sysid_nn import ISSMRegressor, TDLRegressor
-from sysid_nn._uncertainty import _bandwidth, _bartlett
+from sysid_nn._analysis._uncertainty import _bandwidth, _bartlett
 from sysid_nn.plotting import plot_band
 from sysid_nn.uncertainty import ensemble_std, interval_coverage, normal_interval
 
@@ -116,7 +116,7 @@ def test_long_records_use_the_accumulated_normal_matrix(monkeypatch):
     The covariance then assumes white residuals: on a white-noise linear
     output-error record it agrees with the autocorrelation-robust one.
     """
-    from sysid_nn import _uncertainty
+    from sysid_nn._analysis import _uncertainty
 
     rng = np.random.default_rng(2)
     u, _, y = linear_record(2000, rng)

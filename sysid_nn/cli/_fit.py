@@ -176,8 +176,8 @@ def _run_fit(args: argparse.Namespace) -> int:
     from sklearn.utils import Bunch
 
     from sysid_nn import __version__
+    from sysid_nn._analysis._sensitivity import chaos_hint
     from sysid_nn._compile import prepare_kernels
-    from sysid_nn._sensitivity import chaos_hint
     from sysid_nn.study import StudyModel
 
     inputs, outputs = tuple(args.input), tuple(args.output)

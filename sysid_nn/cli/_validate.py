@@ -98,7 +98,7 @@ def _load_model(path: Path):
 
 
 def _check_max_lag(max_lag: int, records: _Records) -> None:
-    from sysid_nn._correlation_tests import max_lag_bound
+    from sysid_nn._analysis._correlation_tests import max_lag_bound
 
     lengths = records.lengths()
     shortest = min(range(len(lengths)), key=lengths.__getitem__)
@@ -117,8 +117,8 @@ def _check_max_lag(max_lag: int, records: _Records) -> None:
 
 
 def _run_validate(args: argparse.Namespace) -> int:
+    from sysid_nn._analysis._sensitivity import chaos_hint
     from sysid_nn._compile import prepare_kernels
-    from sysid_nn._sensitivity import chaos_hint
     from sysid_nn.study import run_validation
 
     bundle = _load_model(args.model)

@@ -30,8 +30,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sysid_nn._data import _FREE_RUN
 from sysid_nn._exceptions import user_stacklevel
+from sysid_nn._records._data import _FREE_RUN
 
 #: A validation record simulated from rest is scored after the linear
 #: model's response to its initial state has fallen below this share of
@@ -106,7 +106,7 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
     starts: on the EMPS benchmark, an integrating plant, the one from the
     subspace start diverged on validation while the one from the ARX start
     stayed bounded), as the fresh restart ``new_restart(k)`` (a
-    :class:`~sysid_nn._training._Restart`); the better one by its score is
+    :class:`~sysid_nn._engine._training._Restart`); the better one by its score is
     the candidate. Validation records, simulated from rest, are then
     scored after :func:`burn_in` samples (or from fitted starts, below).
     Returns None for estimators without a linear candidate (see

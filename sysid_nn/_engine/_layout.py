@@ -30,7 +30,7 @@ class MLPLayout:
     Examples
     --------
     >>> import numpy as np
-    >>> from sysid_nn._layout import MLPLayout
+    >>> from sysid_nn._engine._layout import MLPLayout
     >>> layout = MLPLayout([3, 4, 2], bypass=True)
     >>> layout.n_params, [layer.weights for layer in layout.layers]
     (32, [slice(0, 12, None), slice(16, 24, None)])

@@ -12,29 +12,29 @@ from sklearn.utils import Bunch
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from sysid_nn._base import _RecurrentRegressorBase, after_run_in
-from sysid_nn._data import _FREE_RUN, _Data
-from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._innovation import UnstablePredictorWarning, stabilise_predictor
-from sysid_nn._issm_realisation import (
-    realisation_map,
-    realise_tdl,
-    start_tdl,
-    validate_tdl_start,
-)
-from sysid_nn._issm_start import (
+from sysid_nn._engine._innovation import UnstablePredictorWarning, stabilise_predictor
+from sysid_nn._engine._issm_start import (
     ARX_LAGS,
     arx_lags,
     linear_start,
     subspace_horizon,
     subspace_start,
 )
+from sysid_nn._engine._order import _n_weights, auto_width
+from sysid_nn._engine._state_estimation import fit_initial_condition
+from sysid_nn._estimators._base import _RecurrentRegressorBase, after_run_in
+from sysid_nn._estimators._estimator_docs import document_estimator
+from sysid_nn._estimators._issm_realisation import (
+    realisation_map,
+    realise_tdl,
+    start_tdl,
+    validate_tdl_start,
+)
+from sysid_nn._estimators._tdl import TDLRegressor
 from sysid_nn._kernels._issm import issm_gradient, issm_predict_horizon, issm_run
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
-from sysid_nn._order import _n_weights, auto_width
-from sysid_nn._state_estimation import fit_initial_condition
-from sysid_nn._tdl import TDLRegressor
+from sysid_nn._records._data import _FREE_RUN, _Data
 
 __all__ = ["ISSMRegressor", "UnstablePredictorWarning"]
 
@@ -110,7 +110,7 @@ class ISSMRegressor(_RecurrentRegressorBase):
     filter, so the gradient is exact. The first segment of each record is
     the filter's burn-in. Segments then are independent of each other, and
     the stages before the free run are evaluated on a random subset of
-    blocks of segments on long records (see ``sysid_nn._schedule``). With
+    blocks of segments on long records (see ``sysid_nn._engine._schedule``). With
     fewer, the measured states restart from the measured outputs and the
     unmeasured ones carry over from the previous segment. Measured: on the
     Wiener-Hammerstein benchmark (6 states) filtered starts gave a test error

@@ -1,6 +1,6 @@
 """The order from the data: the ISSM's ``n_states="auto"``, the TDL's lags.
 
-One subspace projection of the training records (:mod:`sysid_nn._subspace`)
+One subspace projection of the training records (:mod:`sysid_nn._engine._subspace`)
 gives the singular values, which fall off after the system's order, and a
 linear innovation model of every candidate order (p up to :data:`MAX_ORDER`)
 at the cost of a few least-squares fits. Each candidate's free run from rest
@@ -35,7 +35,7 @@ it. The rule, whose inputs are all kept in ``order_selection_``:
 
 The TDL network's ``"auto"`` lags are the same order spread over the
 outputs, ``ceil(n_states / p)`` and at least 3
-(:func:`sysid_nn._issm_start.order_lags`, the lags of the ISSM's ARX start:
+(:func:`sysid_nn._engine._issm_start.order_lags`, the lags of the ISSM's ARX start:
 3 for the paper's oscillator), and the short-records limit counts the TDL's
 own weights. Both estimators take the rule through
 ``_RecurrentRegressorBase._choose_order``.
@@ -46,13 +46,13 @@ from __future__ import annotations
 import numpy as np
 from sklearn.utils import Bunch
 
-from sysid_nn._issm_start import (
+from sysid_nn._engine._issm_start import (
     lags_per_output,
     subspace_horizon,
     subspace_records,
 )
+from sysid_nn._engine._subspace import output_error_model, projection
 from sysid_nn._kernels._linear import linear_free_run
-from sysid_nn._subspace import output_error_model, projection
 
 #: Largest linear order tried.
 MAX_ORDER = 10

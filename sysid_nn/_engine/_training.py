@@ -3,14 +3,14 @@
 :func:`train` runs a fit's restarts on a model structure, the estimator
 that supplies the structure hooks (``_initial_params``, ``_run``,
 ``_stages``, ``_stage_objective``, ...; see
-:class:`~sysid_nn._base._RecurrentRegressorBase`):
+:class:`~sysid_nn._estimators._base._RecurrentRegressorBase`):
 
 * every restart draws its starting weights and runs the stages of the
-  schedule (:mod:`sysid_nn._schedule`) with the estimator's solver
-  (:mod:`sysid_nn._solvers`), each stage on the objective the structure
+  schedule (:mod:`sysid_nn._engine._schedule`) with the estimator's solver
+  (:mod:`sysid_nn._engine._solvers`), each stage on the objective the structure
   gives it (:func:`fit_stages`); a :class:`_Tracker` keeps the weights with
   the best validation loss seen after any step, and the histories;
-* successive halving (:func:`~sysid_nn._schedule.survivors`) lets the better
+* successive halving (:func:`~sysid_nn._engine._schedule.survivors`) lets the better
   half of the restarts run the last stages;
 * :func:`choose_restart` picks the restart whose weights are returned;
 * :func:`fallback` replaces a choice whose free run diverged.
@@ -34,15 +34,15 @@ import threadpoolctl
 from joblib import Parallel, delayed
 from sklearn.utils import check_random_state
 
-from sysid_nn import _progress, _selection
-from sysid_nn._data import _FREE_RUN, _Data
+from sysid_nn._engine import _progress, _selection
+from sysid_nn._engine._progress import report_stage
+from sysid_nn._engine._schedule import HALVING_AFTER, stage_data, survivors
+from sysid_nn._engine._solvers import _SOLVERS, _EarlyStop, _Objective
 from sysid_nn._exceptions import DivergenceWarning, user_stacklevel
-from sysid_nn._progress import report_stage
-from sysid_nn._schedule import HALVING_AFTER, stage_data, survivors
-from sysid_nn._solvers import _SOLVERS, _EarlyStop, _Objective
+from sysid_nn._records._data import _FREE_RUN, _Data
 
 #: The stages before the last end when Levenberg-Marquardt's cost stalls over
-#: this many accepted steps (see ``sysid_nn._solvers._solve_lm``), not only at
+#: this many accepted steps (see ``sysid_nn._engine._solvers._solve_lm``), not only at
 #: their budget (measured in the user guide's training page).
 _STALL_STEPS = 10
 #: The hidden weights of the linear model's refinement start at this share of
@@ -131,7 +131,7 @@ class _Restart:
     """One restart's progress through the training schedule.
 
     ``stage`` is the next stage to run; ``rng`` draws the initial weights,
-    then each stage's subset of the records (see :mod:`sysid_nn._schedule`).
+    then each stage's subset of the records (see :mod:`sysid_nn._engine._schedule`).
     """
 
     k: int
@@ -213,7 +213,7 @@ class Training:
     #: The chosen run (a restart's, or the linear model's).
     chosen_run: _Run | None = None
     #: Per run, whether its free run stays bounded at twice the training
-    #: amplitude (see :func:`sysid_nn._selection.bounded_beyond_range`).
+    #: amplitude (see :func:`sysid_nn._engine._selection.bounded_beyond_range`).
     bounded: list = field(default_factory=list)
     #: The index of the run that refined the linear model (None without one;
     #: see :func:`refine_linear`).
@@ -229,7 +229,7 @@ class Training:
 def train(est, train_data: _Data, val: _Data | None) -> Training:
     """Run every restart of ``est`` through its schedule and choose one.
 
-    Successive halving (see :mod:`sysid_nn._schedule`): every restart runs
+    Successive halving (see :mod:`sysid_nn._engine._schedule`): every restart runs
     the first stages, the better half by its score the rest.
     """
     rng = check_random_state(est.random_state)
@@ -240,7 +240,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     n_stages = len(est._stages())
     halving = n_runs > 1 and n_stages > HALVING_AFTER
     # The linear model every network must beat; it also sets the burn-in
-    # of validation records simulated from rest (see sysid_nn._selection).
+    # of validation records simulated from rest (see sysid_nn._engine._selection).
     linear = _selection.linear_candidate(
         est, train_data, val, lambda k: _Restart(k, int(seeds[0]))
     )
@@ -319,7 +319,7 @@ def choose_restart(est, train_data, val, runs: list, linear):
     weights, or without validation data its training loss on the final
     objective; a diverged one scores ``inf``; the first of equal ones), if
     it beats the linear model; else the linear model (``index`` None,
-    ``selected`` ``"linear"``). See :func:`sysid_nn._selection.choose`.
+    ``selected`` ``"linear"``). See :func:`sysid_nn._engine._selection.choose`.
     """
     chosen, selected, bounded = _selection.choose(est, train_data, val, runs, linear)
     index = next((k for k, r in enumerate(runs) if r is chosen), None)
@@ -369,7 +369,7 @@ def fit_stages(est, train_data, val, restart, stop):
     """Run ``restart`` from its next stage up to stage ``stop``.
 
     Every stage but the last sees the records :func:`_schedule.stage_data
-    <sysid_nn._schedule.stage_data>` selects. Returns ``(restart, run)``:
+    <sysid_nn._engine._schedule.stage_data>` selects. Returns ``(restart, run)``:
     the advanced :class:`_Restart` and the :class:`_Run` it would give if
     it ended here (best validation weights and the selection score).
     """

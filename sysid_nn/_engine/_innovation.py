@@ -12,9 +12,9 @@ import warnings
 
 import numpy as np
 
-from sysid_nn._data import _Data
+from sysid_nn._engine._solvers import _Objective, _solve_lm
 from sysid_nn._exceptions import user_stacklevel
-from sysid_nn._solvers import _Objective, _solve_lm
+from sysid_nn._records._data import _Data
 
 #: Solver iterations spent refitting the innovation weights after a
 #: simulation-focused fit.

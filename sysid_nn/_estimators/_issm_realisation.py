@@ -13,9 +13,9 @@ import copy
 import numpy as np
 from sklearn.utils import Bunch
 
-from sysid_nn._issm_start import ARX_LAGS, linear_blocks
+from sysid_nn._engine._issm_start import ARX_LAGS, linear_blocks
+from sysid_nn._estimators._tdl import TDLRegressor
 from sysid_nn._kernels._mlp import n_params
-from sysid_nn._tdl import TDLRegressor
 
 
 def validate_tdl_start(est) -> None:

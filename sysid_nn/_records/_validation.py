@@ -78,10 +78,10 @@ def check_real(x: object, name: str) -> float:
     --------
     >>> check_real(2, "dt")
     2.0
-    >>> check_real(True, "dt")
+    >>> check_real(True, "dt")  # doctest: +IGNORE_EXCEPTION_DETAIL
     Traceback (most recent call last):
     ...
-    sysid_nn._validation.InvalidArgumentError: dt must be a real number, got True ...
+    InvalidArgumentError: dt must be a real number, got True ...
     """
     _check_type(x, name, numbers.Real, "a real number")
     value = float(x)

@@ -1,7 +1,7 @@
 """The data layer: sequences, their validation, scaling and stacking.
 
 The ground floor of the estimators: nothing here imports another module of
-the package but :mod:`sysid_nn._validation`. A fit or a prediction goes
+the package but :mod:`sysid_nn._records._validation`. A fit or a prediction goes
 through it in this order:
 
 * :func:`is_sequence_list`, the one rule for "an array or a list of
@@ -23,7 +23,7 @@ import numpy as np
 from sklearn.utils import check_array
 from sklearn.utils.validation import _check_feature_names
 
-from sysid_nn._validation import check_same_width
+from sysid_nn._records._validation import check_same_width
 
 #: Segment length of a free run: longer than any record.
 _FREE_RUN = np.iinfo(np.int64).max // 4
@@ -77,7 +77,7 @@ def is_sequence_list(data) -> bool:
     Examples
     --------
     >>> import numpy as np
-    >>> from sysid_nn._data import is_sequence_list
+    >>> from sysid_nn._records._data import is_sequence_list
     >>> is_sequence_list([np.zeros(3), np.zeros(4)])
     True
     >>> is_sequence_list([[1.0, 2.0], [3.0, 4.0]]), is_sequence_list([1.0, 2.0])

@@ -4,7 +4,7 @@ A simulation-focused fit runs every restart through a sequence of stages
 (:func:`training_stages`): a one-step stage,
 multiple-shooting stages on segments of growing length, and the free run.
 Each stage minimises its least-squares objective with the chosen solver
-(:mod:`sysid_nn._solvers`); the weights with the best validation free run
+(:mod:`sysid_nn._engine._solvers`); the weights with the best validation free run
 seen after any step are kept. Two rules here make the cost follow the
 information in the records rather than their length:
 
@@ -24,8 +24,8 @@ information in the records rather than their length:
   training loss of the final objective) runs the remaining stages. The
   restart with the best score is chosen, as without the rule.
 
-:func:`sysid_nn._training.train` drives the restarts and the halving;
-:func:`sysid_nn._training.fit_stages` runs one restart through a range of
+:func:`sysid_nn._engine._training.train` drives the restarts and the halving;
+:func:`sysid_nn._engine._training.fit_stages` runs one restart through a range of
 stages.
 """
 
@@ -37,10 +37,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sysid_nn._data import _FREE_RUN
+from sysid_nn._records._data import _FREE_RUN
 
 if TYPE_CHECKING:  # pragma: no cover
-    from sysid_nn._data import _Data
+    from sysid_nn._records._data import _Data
 
 #: Samples a stage before the last is evaluated on: about 200 fundamental
 #: periods at 150 samples per period. Records of up to twice as many samples
@@ -108,7 +108,7 @@ def stage_data(data: _Data, seg: int, rng: np.random.RandomState) -> _Data:
     Examples
     --------
     >>> import numpy as np
-    >>> from sysid_nn._data import _Data
+    >>> from sysid_nn._records._data import _Data
     >>> def record(n):
     ...     return _Data(Y=np.zeros((n, 1)), U=np.zeros((n, 1)),
     ...                  starts=np.array([0, n]), h=3)

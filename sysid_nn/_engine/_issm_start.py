@@ -18,8 +18,8 @@ from itertools import pairwise
 import numpy as np
 from sklearn.utils import Bunch
 
-from sysid_nn._data import _Data
-from sysid_nn._subspace import HORIZON, subspace_model
+from sysid_nn._engine._subspace import HORIZON, subspace_model
+from sysid_nn._records._data import _Data
 
 #: Output and input lags of the ARX model the linear part starts from, and
 #: of the TDL network an ``init="tdl"`` model starts from.
@@ -215,7 +215,7 @@ def subspace_start(est, data: _Data) -> Bunch:
     """The linear innovation model ``A, B, K, c`` from subspace identification.
 
     Consistent under white output noise, unlike the ARX fit of
-    :func:`linear_start` (see :mod:`sysid_nn._subspace`). The Kalman gain
+    :func:`linear_start` (see :mod:`sysid_nn._engine._subspace`). The Kalman gain
     ``K`` is the subspace fit's. The states are put in the coordinates of
     :func:`state_coordinates` (along the subspace fit's state estimates),
     with the unmeasured states zero at the model's rest state.

@@ -8,17 +8,17 @@ from math import comb
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
-from sysid_nn._base import _RecurrentRegressorBase
-from sysid_nn._data import _FREE_RUN, _Data
-from sysid_nn._estimator_docs import document_estimator
-from sysid_nn._issm_start import ARX_LAGS, order_lags
+from sysid_nn._engine._issm_start import ARX_LAGS, order_lags
+from sysid_nn._engine._layout import MLPLayout
+from sysid_nn._engine._order import tdl_auto_width
+from sysid_nn._engine._shooting import _FreeStateObjective
+from sysid_nn._engine._state_estimation import lowpass
+from sysid_nn._estimators._base import _RecurrentRegressorBase
+from sysid_nn._estimators._estimator_docs import document_estimator
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
 from sysid_nn._kernels._recurrence import SYRK, jacobian_buffers, jacobian_result
 from sysid_nn._kernels._tdl import tdl_gradient, tdl_predict_horizon, tdl_run
-from sysid_nn._layout import MLPLayout
-from sysid_nn._order import tdl_auto_width
-from sysid_nn._shooting import _FreeStateObjective
-from sysid_nn._state_estimation import lowpass
+from sysid_nn._records._data import _FREE_RUN, _Data
 
 __all__ = ["TDLRegressor"]
 

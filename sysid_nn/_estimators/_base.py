@@ -6,16 +6,17 @@ structure, train, keep the result) and the calls on a fitted model
 (``predict``, ``simulate``, ``score``). The parts live elsewhere, each by
 name:
 
-* the data layer, :mod:`sysid_nn._data`: sequence checks, scaling, stacking;
-* the record diagnosis, :mod:`sysid_nn._diagnosis`: the estimates the
+* the data layer, :mod:`sysid_nn._records._data`: sequence checks, scaling, stacking;
+* the record diagnosis, :mod:`sysid_nn._engine._diagnosis`: the estimates the
   ``"auto"`` settings decide by, and the noise warning;
-* the schedule, :mod:`sysid_nn._schedule`: the stages, their data, halving;
-* the training driver, :mod:`sysid_nn._training`: restarts, the choice
+* the schedule, :mod:`sysid_nn._engine._schedule`: the stages, their data, halving;
+* the training driver, :mod:`sysid_nn._engine._training`: restarts, the choice
   among them, the fallback, the histories;
-* the structure: the subclass (:mod:`sysid_nn._tdl`, :mod:`sysid_nn._issm`)
+* the structure: the subclass (:mod:`~sysid_nn._estimators._tdl`,
+  :mod:`~sysid_nn._estimators._issm`)
   supplies its kernels, starting weights and initial conditions through the
-  hooks below, and its weight layout through :mod:`sysid_nn._layout`;
-* the state estimator, :mod:`sysid_nn._state_estimation`: initial
+  hooks below, and its weight layout through :mod:`sysid_nn._engine._layout`;
+* the state estimator, :mod:`sysid_nn._engine._state_estimation`: initial
   conditions fitted to a measured window (``y_init``).
 
 A fit is atomic: when it fails or is interrupted, the estimator's
@@ -36,39 +37,43 @@ from sklearn.utils import Bunch
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
-from sysid_nn import _uncertainty
-from sysid_nn._data import (
-    _FREE_RUN,
-    _Data,
-    _mean_scale,
-    _SequenceIO,
-    is_sequence_list,
+from sysid_nn._analysis import _uncertainty
+from sysid_nn._engine._diagnosis import (
+    RecordDiagnosis,
+    diagnose_records,
+    warn_white_misfit,
 )
-from sysid_nn._diagnosis import RecordDiagnosis, diagnose_records, warn_white_misfit
-from sysid_nn._estimator_docs import document_estimator
+from sysid_nn._engine._layout import MLPLayout
+from sysid_nn._engine._order import select_order
+from sysid_nn._engine._schedule import training_stages
+from sysid_nn._engine._solvers import _Objective
+from sysid_nn._engine._state_estimation import (
+    _RUN_IN,
+    _SETTLED_TOL,
+    fit_initial_condition,
+    rest_check,
+)
+from sysid_nn._engine._training import (
+    _REFINE_BUDGET,
+    _single_threaded_blas,
+    fit_stages,
+    train,
+)
+from sysid_nn._estimators._estimator_docs import document_estimator
 from sysid_nn._exceptions import (
     DivergenceWarning,
     check_version,
     user_stacklevel,
     version_stamp,
 )
-from sysid_nn._layout import MLPLayout
-from sysid_nn._order import select_order
-from sysid_nn._record_checks import trim_padding
-from sysid_nn._schedule import training_stages
-from sysid_nn._solvers import _Objective
-from sysid_nn._state_estimation import (
-    _RUN_IN,
-    _SETTLED_TOL,
-    fit_initial_condition,
-    rest_check,
+from sysid_nn._records._data import (
+    _FREE_RUN,
+    _Data,
+    _mean_scale,
+    _SequenceIO,
+    is_sequence_list,
 )
-from sysid_nn._training import (
-    _REFINE_BUDGET,
-    _single_threaded_blas,
-    fit_stages,
-    train,
-)
+from sysid_nn._records._record_checks import trim_padding
 
 __all__ = ["DivergenceWarning"]
 
@@ -193,7 +198,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         raise NotImplementedError
 
     def _layout(self) -> MLPLayout:
-        """Where each weight sits in ``coefs_`` (see :mod:`sysid_nn._layout`)."""
+        """Where each weight sits in ``coefs_`` (see ``sysid_nn._engine._layout``)."""
         return MLPLayout(self._sizes_, self._bypass())
 
     def _penalty_mask(self) -> np.ndarray:
@@ -354,7 +359,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
     def _choose_order(self, train: _Data, val: _Data | None) -> None:
         """The order of an ``"auto"`` structure, read from the records.
 
-        One rule for both networks (:func:`sysid_nn._order.select_order`),
+        One rule for both networks (:func:`sysid_nn._engine._order.select_order`),
         scored on ``val`` (``train`` when there is none); its evidence is
         kept in ``order_selection_``.
         """
@@ -379,7 +384,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         raise NotImplementedError
 
     def _keep_training(self, result, val: _Data | None) -> None:
-        """The fitted attributes of a :class:`~sysid_nn._training.Training`."""
+        """The fitted attributes of a :class:`~sysid_nn._engine._training.Training`."""
         chosen = result.run
         with_validation = val is not None
         self.validation_burn_in_ = None if val is None else val.burn
@@ -456,10 +461,10 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
     def _diagnose(self, train: _Data) -> RecordDiagnosis:
         """Estimate, decide: what the records say, and the settings it sets.
 
-        The estimates (:func:`sysid_nn._diagnosis.diagnose_records`) set
+        The estimates (:func:`sysid_nn._engine._diagnosis.diagnose_records`) set
         ``shooting_`` and ``alpha_`` here and the ISSM's start in its
         ``_prepare_structure``; the warning comes from
-        :func:`sysid_nn._diagnosis.warn_white_misfit`.
+        :func:`sysid_nn._engine._diagnosis.warn_white_misfit`.
         """
         diagnosis = diagnose_records(type(self).__name__, train, self.input_delay)
         self._diagnosis = diagnosis
@@ -492,7 +497,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
 
         Then a stage's loss is a sum over segments, and the stages before
         the last may see a subset of them (:func:`_schedule.stage_data
-        <sysid_nn._schedule.stage_data>`).
+        <sysid_nn._engine._schedule.stage_data>`).
         """
         return True
 
@@ -525,7 +530,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         Returns ``(X_train, y_train, X_val, y_val)``. A tail block is a
         validation record of its own, judged as one passed as ``X_val``:
         from rest, after the burn-in or from the fitted start that
-        :func:`~sysid_nn._selection.linear_candidate` sets. (Judged as the
+        :func:`~sysid_nn._engine._selection.linear_candidate` sets. (Judged as the
         continuation of a free run over the training part, it could not
         see a network that never forgets its initial state: on Silverbox,
         ``random_state=1`` chose one that tested at 7.4 mV from rest and
@@ -595,7 +600,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
 
     def _fit_one(self, train: _Data, val: _Data | None, restart, stop: int):
         """One restart through the stages before ``stop`` (see
-        :func:`sysid_nn._training.fit_stages`); a structure may override it
+        :func:`sysid_nn._engine._training.fit_stages`); a structure may override it
         to give a restart its own start."""
         # The linear algebra here is small (tens to hundreds of weights):
         # threaded BLAS only spins, and restarts already run in parallel.
@@ -603,7 +608,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
             return self._fit_stages(train, val, restart, stop)
 
     def _fit_stages(self, train: _Data, val: _Data | None, restart, stop: int):
-        """See :func:`sysid_nn._training.fit_stages`."""
+        """See :func:`sysid_nn._engine._training.fit_stages`."""
         return fit_stages(self, train, val, restart, stop)
 
     # ----------------------------------------------------------- predicting
@@ -645,7 +650,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         """The sequences preceded by the run-in that brings the model to rest.
 
         Only when ``at_rest`` (no initial conditions given) and the model
-        has a rest (see :func:`~sysid_nn._state_estimation.rest_check`:
+        has a rest (see :func:`~sysid_nn._engine._state_estimation.rest_check`:
         ``rest_output_`` for the fitted weights, found again for weights
         changed since). The run-in is run with each sequence, not replaced
         by its end state, so that the weights' uncertainty reaches the rest
@@ -661,7 +666,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         return Xs, np.full(len(Xs), lead, dtype=np.int64)
 
     def _rest_check(self) -> Bunch:
-        """:func:`~sysid_nn._state_estimation.rest_check` of the current
+        """:func:`~sysid_nn._engine._state_estimation.rest_check` of the current
         weights, in the user's units (``rest_check_``)."""
 
         def free_run(X):
@@ -711,7 +716,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         For each sequence, the initial condition (``initial_outputs`` or
         ``initial_state``) whose free run best fits ``y_init`` over the
         first ``len(y_init)`` samples, by least squares (see
-        :func:`~sysid_nn._state_estimation.fit_initial_condition`).
+        :func:`~sysid_nn._engine._state_estimation.fit_initial_condition`).
         """
         windows = self._per_sequence(y_init, len(Xs), as_list, "y_init")
         offset, scale = self._initial_units()

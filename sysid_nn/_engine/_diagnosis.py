@@ -28,15 +28,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sysid_nn._data import _Data
-from sysid_nn._exceptions import user_stacklevel
-from sysid_nn._record_checks import check_sampling
-from sysid_nn._state_estimation import (
+from sysid_nn._engine._state_estimation import (
     _FULL_BAND,
     _segments,
     noise_band,
     one_step_misfit,
 )
+from sysid_nn._exceptions import user_stacklevel
+from sysid_nn._records._data import _Data
+from sysid_nn._records._record_checks import check_sampling
 
 #: A linear one-step misfit above this share of the spread of the outputs'
 #: second difference is broadband: the one-step stage would fit to it.
@@ -101,7 +101,7 @@ class RecordDiagnosis:
 def diagnose_records(name: str, train: _Data, delay: int) -> RecordDiagnosis:
     """Estimate what the automatic settings need from the training records.
 
-    Also warns, through :func:`~sysid_nn._record_checks.check_sampling`,
+    Also warns, through :func:`~sysid_nn._records._record_checks.check_sampling`,
     when the records are sampled far finer than the defaults handle.
     """
     modelled = _segments(train.starts, train.h)

@@ -18,7 +18,7 @@ from scipy import stats
 from statsmodels.tsa.stattools import ccovf
 
 from sysid_nn._docstrings import fill_doc
-from sysid_nn.metrics import _as_sequence_list, _check_paired
+from sysid_nn._records._sequences import as_sequence_list, check_paired
 
 
 # ----------------------------------------------------------------------------
@@ -26,7 +26,7 @@ from sysid_nn.metrics import _as_sequence_list, _check_paired
 # ----------------------------------------------------------------------------
 def _series_list(data: Any, name: str) -> list[np.ndarray]:
     """One finite series per sequence (1-D, or 2-D with one column)."""
-    seqs, _ = _as_sequence_list(data, name, allow_nan=False)
+    seqs, _ = as_sequence_list(data, name, allow_nan=False)
     if seqs[0].shape[1] != 1:
         raise ValueError(
             f"{name} must be one series, 1-D or with one column; got "
@@ -38,8 +38,8 @@ def _series_list(data: Any, name: str) -> list[np.ndarray]:
 
 def _input_list(data: Any, residuals: list[np.ndarray]) -> list[np.ndarray]:
     """Finite 2-D input sequences paired with the residual sequences."""
-    seqs, _ = _as_sequence_list(data, "inputs", allow_nan=False)
-    _check_paired([r[:, None] for r in residuals], seqs, "residuals", "inputs")
+    seqs, _ = as_sequence_list(data, "inputs", allow_nan=False)
+    check_paired([r[:, None] for r in residuals], seqs, "residuals", "inputs")
     return seqs
 
 

@@ -29,9 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sysid_nn._data import _FREE_RUN, _Data
-from sysid_nn._solvers import _damping
-from sysid_nn._state_estimation import _segments
+from sysid_nn._engine._solvers import _damping
+from sysid_nn._engine._state_estimation import _segments
+from sysid_nn._records._data import _FREE_RUN, _Data
 
 #: Rows (times outputs) of one kernel call when forming the normal
 #: equations: bounds the full Jacobian block held at once.
@@ -99,7 +99,7 @@ class _FreeStateObjective:
     outputs of every segment (``n_state`` rows of all outputs, standardised,
     oldest last as in the history rows), started from ``start_data``'s
     values, a low-passed copy of the records for noisy ones. The penalty is
-    that of :class:`sysid_nn._solvers._Objective` on the weights (``alpha``,
+    that of :class:`sysid_nn._engine._solvers._Objective` on the weights (``alpha``,
     by default the estimator's ``alpha_``).
     """
 

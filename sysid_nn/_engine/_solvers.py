@@ -22,7 +22,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 if TYPE_CHECKING:  # pragma: no cover
-    from sysid_nn._data import _Data
+    from sysid_nn._records._data import _Data
 
 
 #: Relative fall of a stage's cost over its last ``stall`` accepted steps
