@@ -293,7 +293,7 @@ def test_fallback_returns_the_linear_start_when_every_restart_diverged(monkeypat
 
     def diverging(train, val, restart, stop):
         restart, run = original(train, val, restart, stop)
-        run.score = np.inf  # as if its free run had diverged on validation
+        run.criterion = np.inf  # as if its free run had diverged on validation
         return restart, run
 
     model._fit_stages = diverging

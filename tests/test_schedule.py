@@ -172,7 +172,7 @@ def _spy_stages(model, log):
     def spy(train, val, restart, stop):
         first = restart.stage
         out = original(train, val, restart, stop)
-        log.append((restart.k, first, stop, out[1].score))
+        log.append((restart.k, first, stop, out[1].criterion))
         return out
 
     model._fit_stages = spy
@@ -200,7 +200,7 @@ def test_halving_keeps_the_restart_selected_by_validation(n_init):
     first = [entry for entry in log if entry[1] == 0]
     later = [entry for entry in log if entry[1] > 0]
     # Every restart ran the first stages; the better half by validation
-    # score at that point ran the rest.
+    # criterion at that point ran the rest.
     assert sorted(k for k, *_ in first) == list(range(n_init))
     assert all(stop == _schedule.HALVING_AFTER for _, _, stop, _ in first)
     at_cut = {k: score for k, _, _, score in first}

@@ -30,6 +30,22 @@ def _linear_record(seed, n=300, noise=0.1, poles=(-1.2, 0.5)):
     return u, y + noise * y.std() * rng.standard_normal(n), y
 
 
+def _run(w, loss, val_loss):
+    """A training run with the given losses, judged by its validation loss."""
+    from sysid_nn._engine._training import _Run
+
+    return _Run(
+        w=w,
+        loss=loss,
+        val_loss=val_loss,
+        criterion=val_loss,
+        n_iter=1,
+        converged=True,
+        history=[],
+        best_stage=0,
+    )
+
+
 def _nrmse(model, X, y):
     return np.sqrt(np.mean((model.simulate(X) - y) ** 2)) / y.std()
 
@@ -76,8 +92,8 @@ def test_issm_linear_candidate_comes_from_its_better_linear_start(monkeypatch):
         if not self._hidden_layers():
             start = self._linear_starts[self._start_of(restart.k)][0]
             if start == "subspace":
-                run = replace(run, score=np.inf, val_loss=np.inf)
-            trained.append((restart.k, start, run.score))
+                run = replace(run, criterion=np.inf, val_loss=np.inf)
+            trained.append((restart.k, start, run.criterion))
         return restart_, run
 
     monkeypatch.setattr(ISSMRegressor, "_fit_one", spy)
@@ -144,7 +160,7 @@ def test_refinement_reports_the_start_of_its_linear_model(monkeypatch):
         restart_, run = fit_one(self, train, val, restart, stop)
         start = self._linear_starts[self._start_of(restart.k)][0]
         if not self._hidden_layers() and start == "arx":
-            run = replace(run, score=np.inf, val_loss=np.inf)
+            run = replace(run, criterion=np.inf, val_loss=np.inf)
         return restart_, run
 
     choose = _selection.choose
@@ -240,7 +256,6 @@ def test_validation_record_from_rest_judges_as_the_tail_within_the_record():
 
 def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
     from sysid_nn._engine._selection import bounded_beyond_range, choose
-    from sysid_nn._engine._training import _Run
 
     X, y, _ = _linear_record(0, noise=0.0)
     y = np.tanh(y)
@@ -269,8 +284,8 @@ def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
         model._run(bad, train, 1, False)[0], model._run(good, train, 1, False)[0]
     )
     runs = [
-        _Run(bad, 0.0, 0.5, 0.5, 1, True, [], 0),
-        _Run(good, 0.0, 1.0, 1.0, 1, True, [], 0),
+        _run(bad, 0.0, 0.5),
+        _run(good, 0.0, 1.0),
     ]
     chosen, selected, bounded = choose(model, train, None, runs, None)
     assert chosen.w is good
@@ -283,7 +298,6 @@ def test_restart_that_fits_its_training_records_worse_than_linear_is_not_chosen(
     # record was 1.2-4 times the linear model's validated up to 24 % better
     # on the 205 validation samples, and tested 1.5-3 times worse.
     from sysid_nn._engine._selection import LinearCandidate, choose
-    from sysid_nn._engine._training import _Run
 
     X, y, _ = _linear_record(0, noise=0.0)
     model = TDLRegressor(
@@ -292,12 +306,9 @@ def test_restart_that_fits_its_training_records_worse_than_linear_is_not_chosen(
     ).fit(X, y)  # fmt: skip
     train = model._stack([X], [y[:, None]])
     w = model.coefs_
-    # _Run(w, training loss, validation loss, score, ...)
-    lucky = _Run(w.copy(), 0.30, 0.10, 0.10, 1, True, [], 0)
-    sound = _Run(w.copy(), 0.05, 0.15, 0.15, 1, True, [], 0)
-    linear = LinearCandidate(
-        run=_Run(w.copy(), 0.20, 0.20, 0.20, 1, True, [], 0), w=w.copy()
-    )
+    lucky = _run(w.copy(), 0.30, 0.10)
+    sound = _run(w.copy(), 0.05, 0.15)
+    linear = LinearCandidate(run=_run(w.copy(), 0.20, 0.20), w=w.copy())
     chosen, selected, _ = choose(model, train, train, [lucky, sound], linear)
     assert chosen is sound
     assert selected == "restart"

@@ -20,9 +20,9 @@ information in the records rather than their length:
   unmeasured states carry over from one segment to the next.
 * **Successive halving of the restarts** (:func:`survivors`). All restarts
   run the first ``HALVING_AFTER`` stages; only the better half by the
-  selection score (the validation loss, or without validation data the
+  selection criterion (the validation loss, or without validation data the
   training loss of the final objective) runs the remaining stages. The
-  restart with the best score is chosen, as without the rule.
+  restart with the best criterion is chosen, as without the rule.
 
 :func:`sysid_nn._engine._training.train` drives the restarts and the halving;
 :func:`sysid_nn._engine._training.fit_stages` runs one restart through a range of

@@ -5,7 +5,7 @@
 * :func:`linear_candidate`, before the restarts: the same estimator with no
   hidden layer (the linear output-error model: its free run is trained by
   the same schedule, which stabilises most unstable linear starts; one that
-  still diverges on validation scores infinitely and loses), and the
+  still diverges on validation has an infinite loss and loses), and the
   burn-in that validation records simulated from rest skip where they start
   in motion (:func:`burn_in`);
 * :func:`choose`, after them: every restart whose free run diverges on the
@@ -16,7 +16,7 @@
   validates better, was picked by the validation's noise: on the Cascaded
   Tanks benchmark such restarts validated up to 24 % better than the
   linear model on the 205 validation samples and tested 1.5-3 times
-  worse); the best remaining restart is kept only if its validation score
+  worse); the best remaining restart is kept only if its validation loss
   beats the linear model's; otherwise the linear model is returned,
   embedded in the network's own weights (network output silent, linear
   part = the linear model), with a warning.
@@ -33,7 +33,7 @@ import numpy as np
 from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._records._data import _FREE_RUN
 
-#: A validation record simulated from rest is scored after the linear
+#: A validation record simulated from rest is judged after the linear
 #: model's response to its initial state has fallen below this share of
 #: its start.
 _SETTLED = 0.001
@@ -61,12 +61,16 @@ _AMPLITUDE_MARGIN = 2.0
 class LinearCandidate:
     """The linear model of a fit: its run (own weights) and the network's.
 
-    ``k`` is the restart whose linear start it was trained from.
+    ``k`` is the restart whose linear start it was trained from; ``burn``
+    and ``start_window`` how validation records are judged (the ``_Data``
+    fields of those names), set by the linear model's response.
     """
 
     run: object
     w: np.ndarray
     k: int = 0
+    burn: int = 0
+    start_window: int = 0
 
 
 def _linear_copy(est):
@@ -98,7 +102,7 @@ def has_linear_candidate(est) -> bool:
 
 
 def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
-    """Fit the linear model of ``est`` and set the burn-in of ``val``.
+    """Fit the linear model of ``est`` and find how to judge ``val``.
 
     The linear model is ``est`` without hidden layers, trained by the same
     schedule on the same data from each of the linear starts the restarts
@@ -106,11 +110,12 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
     starts: on the EMPS benchmark, an integrating plant, the one from the
     subspace start diverged on validation while the one from the ARX start
     stayed bounded), as the fresh restart ``new_restart(k)`` (a
-    :class:`~sysid_nn._engine._training._Restart`); the better one by its score is
-    the candidate. Validation records, simulated from rest, are then
-    scored after :func:`burn_in` samples (or from fitted starts, below).
-    Returns None for estimators without a linear candidate (see
-    :func:`has_linear_candidate`).
+    :class:`~sysid_nn._engine._training._Restart`); the better one by its criterion is
+    the candidate. Validation records, simulated from rest, are to be
+    judged after :func:`burn_in` samples (or from fitted starts, below):
+    the candidate's ``burn`` and ``start_window``, which the caller sets on
+    ``val`` (left as it is). Returns None for estimators without a linear
+    candidate (see :func:`has_linear_candidate`).
     """
     if not has_linear_candidate(est):
         return None
@@ -121,10 +126,11 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
         (lin._fit_one(train, val, new_restart(k), n_stages)[1], k)
         for k in lin._linear_start_restarts()
     ]
-    run, k = min(fits, key=lambda fit: fit[0].score)  # the first of equals
+    run, k = min(fits, key=lambda fit: fit[0].criterion)  # the first of equals
+    burn = start_window = 0
     if val is not None:
-        val.burn, settled = burn_in(lin, run.w, val)
-        seg = lin._final_segment()  # scored as the restarts are
+        burn, settled = burn_in(lin, run.w, val)
+        seg = lin._final_segment()  # judged as the restarts are
         loss = None
         if not settled and est._estimates_start():
             # The initial state is not forgotten within the record (an
@@ -139,12 +145,18 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
             )
             at_rest = validation_loss(lin, run.w, replace(val, burn=window), seg)
             if fitted < _FITTED_START_GAIN * max(at_rest, np.finfo(float).tiny):
-                val.start_window = val.burn = window
-                loss = fitted  # ``val`` as just scored
+                start_window = burn = window
+                loss = fitted  # ``val`` judged so
         if loss is None:
-            loss = validation_loss(lin, run.w, val, seg)
-        run = replace(run, score=loss, val_loss=loss)
-    return LinearCandidate(run=run, w=embed_linear(est, run.w), k=k)
+            loss = validation_loss(lin, run.w, replace(val, burn=burn), seg)
+        run = replace(run, criterion=loss, val_loss=loss)
+    return LinearCandidate(
+        run=run,
+        w=embed_linear(est, run.w),
+        k=k,
+        burn=burn,
+        start_window=start_window,
+    )
 
 
 def embed_linear(est, w_lin: np.ndarray) -> np.ndarray:
@@ -210,18 +222,18 @@ def _burn_cap(data) -> int:
 
 
 def validation_loss(est, w: np.ndarray, val, seg: int = _FREE_RUN) -> float:
-    """Mean squared error of ``w`` on the scored rows of ``val``.
+    """Mean squared error of ``w`` on the judged rows of ``val``.
 
     The model runs over segments of ``seg`` samples (by default the free
     run), from the initial states fitted to the first ``val.start_window``
-    rows where that is set; a run that diverged scores ``inf``.
+    rows where that is set; a run that diverged has ``inf``.
     """
     if val.start_window:
         val = est._fitted_start(w, val, val.start_window)
     Yhat, _, diverged, _ = est._run(w, val, seg, False, keep_state=False)
     if (diverged >= 0).any():
         return np.inf
-    e = Yhat[val.scored] - val.Y[val.scored]
+    e = Yhat[val.judged] - val.Y[val.judged]
     return float(np.mean(e * e))
 
 
@@ -244,15 +256,15 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
     Restarts whose free run diverges beyond the training range are
     disqualified (unless all are), and with validation records those whose
     training loss is above the linear model's; the best remaining one is
-    kept if it scores better than the linear model (validation loss, or
+    kept if its criterion beats the linear model's (validation loss, or
     training loss without validation), else the linear model, with a
     warning.
     """
     bounded = [
-        np.isfinite(r.score) and bounded_beyond_range(est, r.w, train) for r in runs
+        np.isfinite(r.criterion) and bounded_beyond_range(est, r.w, train) for r in runs
     ]
     pool = [r for r, ok in zip(runs, bounded, strict=True) if ok] or runs
-    best = min(pool, key=lambda r: r.score)
+    best = min(pool, key=lambda r: r.criterion)
     if linear is None:
         return best, "restart", bounded
     lin = linear.run
@@ -263,19 +275,21 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
     else:
         fitting = pool
     worse = len(pool) - len(fitting)
-    best = min(fitting, key=lambda r: r.score) if fitting else None
-    if best is not None and (best.score < lin.score or not np.isfinite(lin.score)):
+    best = min(fitting, key=lambda r: r.criterion) if fitting else None
+    if best is not None and (
+        best.criterion < lin.criterion or not np.isfinite(lin.criterion)
+    ):
         return best, "restart", bounded
     # Ties within rounding: runs that never left the linear model (the
     # refinement of the linear model that found no better weights), or
     # exact fits alike.
-    tie = _TIE * (1.0 + lin.score)
-    left = [r for r in fitting if r.score - lin.score > tie]
+    tie = _TIE * (1.0 + lin.criterion)
+    left = [r for r in fitting if r.criterion - lin.criterion > tie]
     if best is not None and not left:
         # No run left the linear model: nothing to warn about.
         return replace(lin, w=linear.w), "linear", bounded
     if left:
-        best = min(left, key=lambda r: r.score)
+        best = min(left, key=lambda r: r.criterion)
     if best is None:
         what = (
             f"no trained network fitted the training records better (the "
@@ -285,8 +299,9 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
     else:
         what = (
             f"on the {'validation' if val is not None else 'training'} records "
-            f"(best network {best.score:.3g}, linear model {lin.score:.3g}, mean "
-            "squared free-run error of the standardised outputs)"
+            f"(best network {best.criterion:.3g}, linear model "
+            f"{lin.criterion:.3g}, mean squared free-run error of the "
+            "standardised outputs)"
         )
     warnings.warn(
         f"The linear model of {type(est).__name__} beat every trained network: "

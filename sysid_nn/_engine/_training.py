@@ -27,7 +27,7 @@ import threading
 import time
 import warnings
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import threadpoolctl
@@ -114,15 +114,23 @@ class StageHistory:
     skipped: bool = False
 
 
-@dataclass
+@dataclass(kw_only=True, slots=True)
 class _Run:
+    """What one restart (or the linear model) gives if it ends here."""
+
+    #: The weights it would return (its best by validation, if any).
     w: np.ndarray
+    #: Final objective on the training records (mean squared, standardised).
     loss: float
+    #: Validation loss of ``w`` (NaN without validation records).
     val_loss: float
-    score: float
+    #: What restarts are compared by: ``val_loss``, or ``loss`` without
+    #: validation records; ``inf`` where that is not finite.
+    criterion: float
     n_iter: int
     converged: bool
     history: list
+    #: The stage of ``history`` whose step gave ``w``.
     best_stage: int
 
 
@@ -191,7 +199,7 @@ class _Tracker:
                 raise _EarlyStop
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Training:
     """The outcome of :func:`train`.
 
@@ -218,6 +226,9 @@ class Training:
     #: The index of the run that refined the linear model (None without one;
     #: see :func:`refine_linear`).
     refined: int | None = None
+    #: The validation records as they were judged (burn-in and fitted
+    #: start set from the linear model), or None.
+    validation: _Data | None = None
 
     @property
     def run(self) -> _Run:
@@ -230,7 +241,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     """Run every restart of ``est`` through its schedule and choose one.
 
     Successive halving (see :mod:`sysid_nn._engine._schedule`): every restart runs
-    the first stages, the better half by its score the rest.
+    the first stages, the better half by its criterion the rest.
     """
     rng = check_random_state(est.random_state)
     n_runs = est._n_restarts()
@@ -244,11 +255,13 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     linear = _selection.linear_candidate(
         est, train_data, val, lambda k: _Restart(k, int(seeds[0]))
     )
+    if linear is not None and val is not None:
+        val = replace(val, burn=linear.burn, start_window=linear.start_window)
     restarts = [_Restart(k, seed) for k, seed in enumerate(seeds)]
     cut = HALVING_AFTER if halving else n_stages
     results = run_restarts(est, train_data, val, restarts, cut)
     if halving:
-        kept = survivors([run.score for _, run in results])
+        kept = survivors([run.criterion for _, run in results])
         going_on = [results[k][0] for k in kept]
         done = run_restarts(est, train_data, val, going_on, n_stages)
         for k, result in zip(kept, done, strict=True):
@@ -265,19 +278,20 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
             "extreme values or reduce the learning problem (fewer lags)."
         )
     w, used = chosen.w, None
-    if not np.isfinite(chosen.score):
+    if not np.isfinite(chosen.criterion):
         w, used = fallback(est, chosen.w, train_data, val)
     return Training(
-        runs,
-        best,
-        w,
-        used,
-        time.perf_counter() - start,
-        selected,
-        linear,
-        chosen,
-        bounded,
-        refined,
+        runs=runs,
+        chosen=best,
+        w=w,
+        fallback=used,
+        fit_time=time.perf_counter() - start,
+        selected=selected,
+        linear=linear,
+        chosen_run=chosen,
+        bounded=bounded,
+        refined=refined,
+        validation=val,
     )
 
 
@@ -315,9 +329,9 @@ def choose_restart(est, train_data, val, runs: list, linear):
     bounded)``, ``bounded`` whether each run's free run stays bounded.
 
     Among the restarts whose free run stays bounded beyond the training
-    range, the one with the lowest score (the validation loss of its best
-    weights, or without validation data its training loss on the final
-    objective; a diverged one scores ``inf``; the first of equal ones), if
+    range, the one with the lowest criterion (the validation loss of its
+    best weights, or without validation data its training loss on the final
+    objective; a diverged one has ``inf``; the first of equal ones), if
     it beats the linear model; else the linear model (``index`` None,
     ``selected`` ``"linear"``). See :func:`sysid_nn._engine._selection.choose`.
     """
@@ -371,7 +385,7 @@ def fit_stages(est, train_data, val, restart, stop):
     Every stage but the last sees the records :func:`_schedule.stage_data
     <sysid_nn._engine._schedule.stage_data>` selects. Returns ``(restart, run)``:
     the advanced :class:`_Restart` and the :class:`_Run` it would give if
-    it ended here (best validation weights and the selection score).
+    it ended here (best validation weights and the selection criterion).
     """
     mask = est._penalty_mask()
     n_res = len(train_data.modelled) * est.n_outputs_
@@ -437,16 +451,18 @@ def fit_stages(est, train_data, val, restart, stop):
     else:
         val_loss = np.nan
     loss = _Objective(est, train_data, final_seg, mask, n_res).loss(w)
-    score = val_loss if val is not None else loss
+    criterion = val_loss if val is not None else loss
     run = _Run(
-        w,
-        loss,
-        val_loss,
-        score if np.isfinite(score) else np.inf,
-        restart.n_iter,
-        restart.converged,
-        list(restart.history),
-        tracker.best_stage if val is not None else len(restart.history) - 1,
+        w=w,
+        loss=loss,
+        val_loss=val_loss,
+        criterion=criterion if np.isfinite(criterion) else np.inf,
+        n_iter=restart.n_iter,
+        converged=restart.converged,
+        history=list(restart.history),
+        best_stage=(
+            tracker.best_stage if val is not None else len(restart.history) - 1
+        ),
     )
     return restart, run
 

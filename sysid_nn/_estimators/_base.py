@@ -28,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 import numbers
 import warnings
+from abc import ABCMeta, abstractmethod
 from itertools import pairwise
 
 import numpy as np
@@ -102,7 +103,9 @@ def after_run_in(diverged: np.ndarray, leads: np.ndarray) -> np.ndarray:
     return np.where(diverged >= 0, np.maximum(diverged - leads, 0), -1)
 
 
-class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
+class _RecurrentRegressorBase(
+    RegressorMixin, _SequenceIO, BaseEstimator, metaclass=ABCMeta
+):
     """Base class of the recurrent-network regressors (not public).
 
     :class:`~sklearn.base.RegressorMixin` sits here, below this class in the
@@ -152,26 +155,21 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         return tags
 
     # ------------------------------------------------------- structure hooks
-    def _history_length(self) -> int:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def _history_length(self) -> int: ...
 
-    def _prepare_structure(
-        self, data: _Data, val: _Data | None = None
-    ) -> None:  # pragma: no cover
+    @abstractmethod
+    def _prepare_structure(self, data: _Data, val: _Data | None = None) -> None:
         """Fix data-dependent structure and the linear starting point.
 
         ``val`` are the validation records, when there are any.
         """
-        raise NotImplementedError
 
-    def _initial_params(
-        self, rng: np.random.RandomState
-    ) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def _initial_params(self, rng: np.random.RandomState) -> np.ndarray: ...
 
-    def _run(
-        self, w, data: _Data, seg_len: int, want_jac, keep_state: bool = True
-    ):  # pragma: no cover
+    @abstractmethod
+    def _run(self, w, data: _Data, seg_len: int, want_jac, keep_state: bool = True):
         """Return ``(Yhat, jac, diverged, state_for_gradient)``.
 
         ``jac`` is None for ``want_jac=False``, the full Jacobian of the
@@ -179,23 +177,16 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         - Y))`` for ``"normal"``. Without ``keep_state`` the state holds no
         per-row arrays and cannot serve :meth:`_gradient`.
         """
-        raise NotImplementedError
 
-    def _gradient(
-        self, w, data: _Data, seg_len: int, state
-    ) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def _gradient(self, w, data: _Data, seg_len: int, state) -> np.ndarray: ...
 
-    def _run_horizon(
-        self, w, data: _Data, horizon: int
-    ) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def _run_horizon(self, w, data: _Data, horizon: int) -> np.ndarray: ...
 
-    def _history(
-        self, n_seq: int, initial
-    ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    @abstractmethod
+    def _history(self, n_seq: int, initial) -> tuple[np.ndarray, np.ndarray]:
         """Standardised history rows ``(Y_hist, U_hist)`` for every sequence."""
-        raise NotImplementedError
 
     def _layout(self) -> MLPLayout:
         """Where each weight sits in ``coefs_`` (see ``sysid_nn._engine._layout``)."""
@@ -316,6 +307,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         with _single_threaded_blas():
             self._prepare_structure(train_data, val)
             result = train(self, train_data, val)
+            val = result.validation  # as judged (burn-in, fitted start)
             self._keep_training(result, val)
             self._after_fit(train_data, val)
             _uncertainty.fit_covariance(self, train_data)
@@ -375,13 +367,13 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         """Whether the structure's order is ``"auto"``."""
         return False
 
-    def _set_order(self, n_states: int) -> None:  # pragma: no cover - abstract
+    @abstractmethod
+    def _set_order(self, n_states: int) -> None:
         """Fix the structure for an order of ``n_states`` states."""
-        raise NotImplementedError
 
-    def _weights_at_order(self, n_states: int) -> int:  # pragma: no cover
+    @abstractmethod
+    def _weights_at_order(self, n_states: int) -> int:
         """Weights of the network at an order of ``n_states`` states."""
-        raise NotImplementedError
 
     def _keep_training(self, result, val: _Data | None) -> None:
         """The fitted attributes of a :class:`~sysid_nn._engine._training.Training`."""
@@ -394,7 +386,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self.n_iter_ = chosen.n_iter
         self.loss_ = chosen.loss
         self.best_validation_score_ = -chosen.val_loss if with_validation else None
-        self.restart_scores_ = np.array([-r.score for r in result.runs])
+        self.restart_scores_ = np.array([-r.criterion for r in result.runs])
         self.restart_losses_ = np.array([r.loss for r in result.runs])
         self.restart_bounded_ = np.array(result.bounded, dtype=bool)
         self.n_restarts_ = len(result.runs)
@@ -403,7 +395,9 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         self.selected_ = result.selected
         lin = None if result.linear is None else result.linear.run
         self.linear_score_ = (
-            None if lin is None else (-lin.score if np.isfinite(lin.score) else -np.inf)
+            None
+            if lin is None
+            else (-lin.criterion if np.isfinite(lin.criterion) else -np.inf)
         )
         self.linear_loss_ = None if lin is None else lin.loss
         self.best_stage_ = chosen.best_stage
@@ -565,12 +559,7 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
 
     def _stage_objective(self, data: _Data, seg: int, mask, n_res: int, alpha):
         """The objective of a stage on segments of ``seg`` samples of ``data``."""
-        if self.shooting_ == "free" and 1 < seg < _FREE_RUN:
-            return self._free_state_objective(data, seg, mask, n_res, alpha)
         return _Objective(self, data, seg, mask, n_res, alpha=alpha)
-
-    def _free_state_objective(self, data, seg, mask, n_res, alpha):  # pragma: no cover
-        raise NotImplementedError
 
     def _choose_shooting(self, free_states_help: bool) -> str:
         """How shooting segments start: ``"measured"`` or ``"free"`` (fitted).
@@ -698,17 +687,17 @@ class _RecurrentRegressorBase(RegressorMixin, _SequenceIO, BaseEstimator):
         )
         return Yhat, J, diverged
 
-    def _initial_units(self) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    @abstractmethod
+    def _initial_units(self) -> tuple[np.ndarray, np.ndarray]:
         """``(offset, scale)`` shaped like an initial condition (for ``v``).
 
         The initial-condition fit works on ``v = (initial - offset) / scale``,
         standardised units.
         """
-        raise NotImplementedError
 
-    def _initial_guess(self, y0: np.ndarray) -> np.ndarray:  # pragma: no cover
+    @abstractmethod
+    def _initial_guess(self, y0: np.ndarray) -> np.ndarray:
         """Initial condition at rest at the measured output ``y0`` (user units)."""
-        raise NotImplementedError
 
     def _estimate_initial(self, Xs, y_init, as_list: bool, past) -> list:
         """Initial conditions fitted to the measured start of each sequence.
@@ -874,12 +863,12 @@ default=None
             return -np.inf
         return r2_score(y_true, y_pred, sample_weight=sample_weight)
 
+    @abstractmethod
     def _initial_layout(self) -> tuple[tuple[int, ...], str, str]:
         """Shape of one sequence's initial conditions, its count and meaning.
 
         The two strings complete the error message of :meth:`_check_initial`.
         """
-        raise NotImplementedError  # pragma: no cover - abstract
 
     def _warn_divergence(
         self, diverged: np.ndarray, as_list: bool, what: str = "free run"

@@ -414,10 +414,21 @@ such, default=None
     def _auto_alpha(self) -> float:
         return _NOISY_ALPHA if self.shooting_ == "free" else 0.0
 
-    def _free_state_objective(self, data, seg, mask, n_res, alpha):
-        return _FreeStateObjective(
-            self, data, seg, mask, n_res, self.output_lags_, self._smooth_train, alpha
-        )
+    def _stage_objective(self, data: _Data, seg: int, mask, n_res: int, alpha):
+        # Free-state shooting fits each segment's initial lags beside the
+        # weights (``shooting="free"``); the other stages are the base's.
+        if self.shooting_ == "free" and 1 < seg < _FREE_RUN:
+            return _FreeStateObjective(
+                self,
+                data,
+                seg,
+                mask,
+                n_res,
+                self.output_lags_,
+                self._smooth_train,
+                alpha,
+            )
+        return super()._stage_objective(data, seg, mask, n_res, alpha)
 
     def _independent_segments(self) -> bool:
         # Free-state stages start their segments from the low-passed whole

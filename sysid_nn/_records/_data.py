@@ -61,8 +61,8 @@ class _Data:
         )
 
     @property
-    def scored(self) -> np.ndarray:
-        """Modelled rows that count in a validation score."""
+    def judged(self) -> np.ndarray:
+        """Modelled rows that count in a validation loss (after the burn-in)."""
         rows = [np.arange(a + self.h + self.burn, b) for a, b in pairwise(self.starts)]
         return np.concatenate(rows)
 

@@ -1,0 +1,173 @@
+"""One-line breaks of the training policy, and whether the tests catch them.
+
+Each mutation below is a plausible one-line bug in code that decides what a
+fit returns. The script copies the checkout to a temporary folder, applies
+one mutation at a time, runs the tests aimed at it and reports ``KILLED``
+(a test failed) or ``SURVIVED`` (every test passed: the promise is not
+guarded). A mutation whose text is no longer in its file is reported
+``STALE``: update it with the code it guards.
+
+Run: ``python benchmarks/mutations.py`` (about a minute), or name some:
+``python benchmarks/mutations.py burn-in patience``. Exit status 1 if any
+mutation survived or went stale. Add a mutation here with each new
+decision of the policy, next to the test named for it.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+POLICY = "tests/test_policy.py"
+
+
+@dataclass(frozen=True)
+class Mutation:
+    name: str
+    path: str
+    original: str
+    broken: str
+    tests: tuple[str, ...]
+
+
+MUTATIONS = (
+    Mutation(
+        "burn-in",
+        "sysid_nn/_records/_data.py",
+        "np.arange(a + self.h + self.burn, b)",
+        "np.arange(a + self.h, b)",
+        (f"{POLICY}::test_validation_score_leaves_out_the_burn_in_rows",),
+    ),
+    Mutation(
+        "best weights",
+        "sysid_nn/_engine/_training.py",
+        "        w = tracker.best_w\n",
+        "        w = w\n",
+        (f"{POLICY}::test_coefs_are_the_best_validated_weights_by_a_clear_margin",),
+    ),
+    Mutation(
+        "failed first fit",
+        "sysid_nn/_estimators/_base.py",
+        "            self.__dict__.clear()\n",
+        "",
+        (f"{POLICY}::test_a_failed_first_fit_leaves_only_the_constructor_parameters",),
+    ),
+    Mutation(
+        "patience",
+        "sysid_nn/_engine/_training.py",
+        "        tracker.since_best = 0\n",
+        "",
+        (f"{POLICY}::test_patience_counts_the_current_stages_own_steps",),
+    ),
+    Mutation(
+        "two records",
+        "sysid_nn/_estimators/_base.py",
+        "if len(Xs) >= 3:",
+        "if len(Xs) >= 2:",
+        (f"{POLICY}::test_two_records_hold_out_the_tail_of_the_second",),
+    ),
+    Mutation(
+        "noise degrees of freedom",
+        "sysid_nn/_analysis/_uncertainty.py",
+        "normal.rss / max(normal.n_rows - n_eff / p, 1.0)",
+        "normal.rss / normal.n_rows",
+        (f"{POLICY}::test_noise_variance_carries_its_degrees_of_freedom_correction",),
+    ),
+    Mutation(
+        "covariance small-sample factor",
+        "sysid_nn/_analysis/_uncertainty.py",
+        "cov = inv @ normal.meat @ inv * (n_res / max(n_res - n_eff, 1.0))",
+        "cov = inv @ normal.meat @ inv",
+        (f"{POLICY}::test_weight_covariance_carries_its_small_sample_factor",),
+    ),
+    Mutation(
+        "worst restart",
+        "sysid_nn/_engine/_selection.py",
+        "best = min(pool, key=lambda r: r.criterion)",
+        "best = max(pool, key=lambda r: r.criterion)",
+        (f"{POLICY}::test_without_a_linear_candidate_the_best_restart_is_kept",),
+    ),
+    Mutation(
+        "run-in without rest",
+        "sysid_nn/_estimators/_base.py",
+        "lead = _RUN_IN if rest is not None else 0",
+        "lead = _RUN_IN",
+        (f"{POLICY}::test_a_model_without_rest_starts_from_zero_without_run_in",),
+    ),
+)
+
+
+def _copy_checkout(dest: Path) -> None:
+    files = subprocess.run(
+        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+        cwd=ROOT,
+        capture_output=True,
+        check=True,
+    ).stdout.split(b"\0")
+    for name in filter(None, files):
+        src = ROOT / os.fsdecode(name)
+        if src.is_file():
+            target = dest / os.fsdecode(name)
+            target.parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, target)
+
+
+def _run_tests(tree: Path, tests: tuple[str, ...]) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", *tests],
+        cwd=tree,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+
+
+def main(argv: list[str]) -> int:
+    wanted = [m for m in MUTATIONS if not argv or m.name.split()[0] in argv]
+    if not wanted:
+        names = ", ".join(m.name for m in MUTATIONS)
+        print(f"no mutation named {argv}; the mutations are: {names}")
+        return 2
+    failed = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = Path(tmp)
+        _copy_checkout(tree)
+        # The tests pass on the unmutated code, or the results mean nothing.
+        baseline = _run_tests(tree, tuple({t for m in wanted for t in m.tests}))
+        if baseline.returncode != 0:
+            print("the tests fail on the unmutated code:\n" + baseline.stdout)
+            return 1
+        for m in wanted:
+            path = tree / m.path
+            text = path.read_text()
+            if text.count(m.original) != 1:
+                print(f"STALE     {m.name}: {m.original!r} not once in {m.path}")
+                failed += 1
+                continue
+            path.write_text(text.replace(m.original, m.broken))
+            start = time.perf_counter()
+            try:
+                result = _run_tests(tree, m.tests)
+            finally:
+                path.write_text(text)
+            verdict = "KILLED" if result.returncode != 0 else "SURVIVED"
+            failed += verdict == "SURVIVED"
+            elapsed = time.perf_counter() - start
+            print(f"{verdict:9} {m.name} ({m.path}, {elapsed:.0f} s)", flush=True)
+            # What caught it: an assertion, not an import error.
+            errors = [ln for ln in result.stdout.splitlines() if ln.startswith("E ")]
+            if errors:
+                print(f"          {errors[0][:100]}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

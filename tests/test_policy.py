@@ -1,0 +1,215 @@
+"""Each promise of the training policy, in a test named for it.
+
+Every test here fails on a one-line break of the code it guards; the breaks
+are listed in ``benchmarks/mutations.py``, which applies each one and runs
+the tests aimed at it (``python benchmarks/mutations.py``).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from sysid_nn import HystereticOscillator, ISSMRegressor, TDLRegressor
+from sysid_nn._analysis._uncertainty import (
+    _delta_covariance,
+    _Normal,
+    _residual_variance,
+)
+from sysid_nn._engine import _training
+from sysid_nn._engine._selection import validation_loss
+from sysid_nn._engine._solvers import _EarlyStop
+from sysid_nn._records._data import _FREE_RUN
+
+
+def _records(n, seed=0, n_samples=500):
+    rec = HystereticOscillator(r0=0.05).generate(
+        n, n_samples=n_samples, random_state=seed
+    )
+    return [f[:, None] for f in rec.excitation], list(rec.displacement)
+
+
+def _small(**params):
+    base = dict(
+        output_lags=3,
+        input_lags=3,
+        hidden_layer_sizes=(3,),
+        n_init=2,
+        max_iter=8,
+        shooting_segments=(20,),
+        random_state=0,
+    )
+    return TDLRegressor(**{**base, **params})
+
+
+def _fit(model, *args, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return model.fit(*args, **kwargs)
+
+
+def _validation_data(model, Xv, yv):
+    """The validation records as the fit judged them."""
+    val = model._stack(Xv, [np.reshape(yi, (len(yi), -1)) for yi in yv])
+    val.burn = model.validation_burn_in_
+    val.start_window = model.validation_start_window_
+    return val
+
+
+# ---------------------------------------------------------------- burn-in
+def test_validation_score_leaves_out_the_burn_in_rows():
+    # A validation record cut from the middle of a response starts in
+    # motion: the linear model's burn-in waits out its initial transient.
+    X, y = _records(2, seed=0, n_samples=800)
+    Xv, yv = [X[1][400:]], [y[1][400:]]
+    model = _fit(_small(n_init=1, max_iter=5), X[0], y[0], X_val=Xv, y_val=yv)
+    val = _validation_data(model, Xv, yv)
+    assert val.burn > 0 and val.start_window == 0
+    Yhat = model._run(model.coefs_, val, _FREE_RUN, False, keep_state=False)[0]
+    kept = np.arange(val.h + val.burn, len(val.Y))
+    by_hand = float(np.mean((Yhat[kept] - val.Y[kept]) ** 2))
+    everything = np.arange(val.h, len(val.Y))
+    with_burn = float(np.mean((Yhat[everything] - val.Y[everything]) ** 2))
+    assert with_burn > 1.5 * by_hand  # the burn-in rows do matter here
+    assert validation_loss(model, model.coefs_, val) == pytest.approx(by_hand)
+    # The fit's own figure for the returned weights is that one.
+    assert -model.best_validation_score_ == pytest.approx(by_hand, rel=1e-9)
+
+
+# ------------------------------------------------------ the weights kept
+def test_coefs_are_the_best_validated_weights_by_a_clear_margin():
+    X, y = _records(3, seed=1)
+    model = _fit(_small(n_init=1, max_iter=20, n_iter_no_change=50), X, y)
+    assert model.selected_ == "restart"
+    chosen = model.training_history_[model.best_restart_]
+    seen = [v for stage in chosen for v in stage.validation]
+    # Training went on past the best validation loss, and ended clearly
+    # worse: the last weights are not the ones kept.
+    assert seen[-1] > 1.2 * min(seen)
+    Xv, yv = [X[2]], [y[2]]  # three records: the last is held out
+    val = _validation_data(model, Xv, yv)
+    kept = validation_loss(model, model.coefs_, val)
+    assert kept == pytest.approx(min(seen), rel=1e-9)
+    assert kept == pytest.approx(-model.best_validation_score_, rel=1e-9)
+
+
+def test_without_a_linear_candidate_the_best_restart_is_kept():
+    X, y = _records(3, seed=2)
+    model = _fit(_small(n_init=3, linear_bypass=False), X, y)
+    assert model.refined_restart_ is None and model.linear_score_ is None
+    scores = model.restart_scores_
+    assert len(scores) == 3 and np.ptp(scores) > 1e-3 * np.abs(scores).max()
+    assert model.best_restart_ == int(np.argmax(scores))
+    assert model.best_validation_score_ == scores.max()
+
+
+# ------------------------------------------------------------- patience
+def test_patience_counts_the_current_stages_own_steps(monkeypatch):
+    # A solver that never improves: every stage books steps that do not
+    # beat the best validation loss until patience ends it (the last stage)
+    # or its budget does (the others, which have no patience).
+    steps = []
+
+    def stuck(objective, theta, iters, tol, tracker, stall=None):
+        n = 0
+        try:
+            while n < iters:
+                n += 1
+                tracker(objective.weights(theta))
+        except _EarlyStop:
+            pass
+        steps.append(n)
+        return theta, n, True
+
+    monkeypatch.setitem(_training._SOLVERS, "lm", stuck)
+    X, y = _records(3, seed=3)
+    model = _fit(_small(n_init=1, max_iter=6, n_iter_no_change=4), X, y)
+    history = model.training_history_[0]
+    assert [stage.segment for stage in history] == [1, 20, _FREE_RUN]
+    # The first stages ran their whole budgets (six steps in all) without
+    # improving, and the last one still got its own four steps.
+    budgets = [iters for _, iters in model._stages()]
+    assert [stage.n_iter for stage in history[:-1]] == budgets[:-1]
+    assert sum(budgets[:-1]) >= 4
+    assert history[-1].n_iter == 4
+
+
+# ------------------------------------------------------- held-out records
+def test_two_records_hold_out_the_tail_of_the_second():
+    X, y = _records(2, seed=4)
+    model = _fit(_small(n_init=1, max_iter=4), X, y)
+    n = len(X[1])
+    n_val = round(model.validation_fraction * n)
+    explicit = _fit(
+        _small(n_init=1, max_iter=4),
+        [X[0], X[1][: n - n_val]],
+        [y[0], y[1][: n - n_val]],
+        X_val=[X[1][n - n_val :]],
+        y_val=[y[1][n - n_val :]],
+    )
+    np.testing.assert_array_equal(model.coefs_, explicit.coefs_)
+    np.testing.assert_array_equal(model._y_scale, explicit._y_scale)
+
+
+# -------------------------------------------------------- a failed fit
+@pytest.mark.parametrize("Estimator", [TDLRegressor, ISSMRegressor])
+def test_a_failed_first_fit_leaves_only_the_constructor_parameters(Estimator):
+    X, y = _records(1, seed=5)
+    model = Estimator(n_init=1, max_iter=3)
+    before = dict(vars(model))
+    with pytest.raises(ValueError, match="cannot be standardised"):
+        model.fit(X[0], y[0] * 1e200)
+    assert vars(model) == before
+    assert not hasattr(model, "n_features_in_")
+
+
+# ----------------------------------------------- small-sample corrections
+def _normal(seed=6, n_rows=40, p=2, n_w=5):
+    rng = np.random.default_rng(seed)
+    J = rng.standard_normal((n_rows * p, n_w))
+    R = rng.standard_normal((n_rows, p))
+    G = (R.reshape(-1, 1) * J).reshape(n_rows, p, n_w).sum(axis=1)
+    return _Normal(
+        JtJ=J.T @ J,
+        meat=G.T @ G,
+        rss=(R * R).sum(axis=0),
+        n_rows=n_rows,
+        max_sensitivity=float(np.abs(J).max()),
+        bandwidth=0,
+    )
+
+
+def test_weight_covariance_carries_its_small_sample_factor():
+    normal, p = _normal(), 2
+    cov, n_eff = _delta_covariance(normal, np.zeros(5), p)
+    # Unpenalised, every one of the 5 weights is fitted: n_eff = 5, and
+    # the sandwich is scaled by N p / (N p - n_eff) = 80 / 75.
+    assert n_eff == pytest.approx(5.0, rel=1e-12)
+    inv = np.linalg.inv(normal.JtJ)
+    np.testing.assert_allclose(cov, inv @ normal.meat @ inv * 80 / 75, rtol=1e-10)
+
+
+def test_noise_variance_carries_its_degrees_of_freedom_correction():
+    normal, p = _normal(), 2
+    # rss / (N - n_eff / p) per output: 5 weights shared by 2 outputs.
+    expected = normal.rss / (40 - 5 / 2)
+    np.testing.assert_allclose(_residual_variance(normal, 5.0, p), expected)
+
+
+# ------------------------------------------------------------ free runs
+def test_a_model_without_rest_starts_from_zero_without_run_in():
+    # Records with an offset: the zero state is far from the model's rest,
+    # so a run-in would change the start of every free run.
+    rng = np.random.default_rng(8)
+    X = [rng.standard_normal((300, 1)) for _ in range(3)]
+    y = [1.0 + lfilter([0.0, 0.5], [1.0, -1.5, 0.7], x[:, 0]) for x in X]
+    model = _fit(TDLRegressor(hidden_layer_sizes=(), n_init=1, random_state=0), X, y)
+    zero = {"initial_outputs": np.zeros((model.output_lags_, 1))}
+    at_rest = model.simulate(X[2])
+    from_zero = model.simulate(X[2], **zero)
+    assert np.max(np.abs(at_rest - from_zero)[:5]) > 0.2
+    model.rest_output_ = None  # as a model that never settles has
+    np.testing.assert_array_equal(model.simulate(X[2]), from_zero)
