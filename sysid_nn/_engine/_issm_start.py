@@ -18,6 +18,8 @@ from itertools import pairwise
 import numpy as np
 from sklearn.utils import Bunch
 
+from sysid_nn._engine import _least_squares as least_squares
+from sysid_nn._engine._least_squares import with_intercept
 from sysid_nn._engine._subspace import HORIZON, subspace_model
 from sysid_nn._records._data import _Data
 
@@ -95,11 +97,13 @@ def arx(est, data: _Data, lags: int):
         first = a + data.h + max(lags, nk + lags - 1)
         rows.append(np.arange(first, b))
     rows = np.concatenate(rows)
-    phi = arx_regressors(est, data, rows, lags)
-    theta = np.zeros((phi.shape[1] + 1, p))
-    if len(rows):
-        design = np.hstack([phi, np.ones((len(rows), 1))])
-        theta, *_ = np.linalg.lstsq(design, data.Y[rows], rcond=None)
+    n_reg = lags * (p + est.n_features_in_)
+    theta, _ = least_squares.solve(
+        (with_intercept(arx_regressors(est, data, rows[s], lags)), data.Y[rows[s]])
+        for s in least_squares.row_blocks(len(rows))
+    )
+    if theta is None:
+        theta = np.zeros((n_reg + 1, p))
     m = est.n_features_in_
     A = [theta[i * p : (i + 1) * p].T for i in range(lags)]
     B = [theta[lags * p + j * m : lags * p + (j + 1) * m].T for j in range(lags)]
@@ -127,17 +131,19 @@ def fit_linear_model(est, data: _Data, rows: np.ndarray, x: np.ndarray) -> Bunch
     # K = A H^T: the one-step predictor feeds the measured outputs in
     # place of the measured states. A free least-squares K made the
     # reduced predictor unstable on the hysteretic oscillator.
-    design = np.hstack(
-        [
-            data.Y[t - 1],
-            x[pairs - 1, p:],
-            data.U[t - est.input_delay],
-            np.ones((len(t), 1)),
-        ]
+
+    def design(s):
+        return with_intercept(
+            np.hstack(
+                [data.Y[t[s] - 1], x[pairs[s] - 1, p:], data.U[t[s] - est.input_delay]]
+            )
+        )
+
+    theta, _ = least_squares.solve(
+        (design(s), x[pairs[s]]) for s in least_squares.row_blocks(len(t))
     )
-    theta = np.zeros((design.shape[1], n))
-    if len(t):
-        theta, *_ = np.linalg.lstsq(design, x[pairs], rcond=None)
+    if theta is None:
+        theta = np.zeros((n + m + 1, n))
     A, B = theta[:n].T, theta[n : n + m].T
     K = A[:, :p].copy()
     return Bunch(A=A, B=B, K=K, c=theta[-1])

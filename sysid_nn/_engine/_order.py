@@ -51,7 +51,7 @@ from sysid_nn._engine._issm_start import (
     subspace_horizon,
     subspace_records,
 )
-from sysid_nn._engine._subspace import output_error_model, projection
+from sysid_nn._engine._subspace import is_stable, output_error_model, projection
 from sysid_nn._kernels._linear import linear_free_run
 
 #: Largest linear order tried.
@@ -189,7 +189,7 @@ def _score(est, lin: Bunch, data) -> float:
     ``data`` are standardised stacked records.
     """
     n = lin.A.shape[0]
-    if np.abs(np.linalg.eigvals(lin.A)).max() >= 1.0:
+    if not is_stable(lin.A):
         return np.inf
     Y, U = subspace_records(est, data)
     u_rest = -est._x_mean / est._x_scale

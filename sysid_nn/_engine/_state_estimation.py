@@ -20,6 +20,9 @@ from itertools import pairwise
 import numpy as np
 from sklearn.utils import Bunch
 
+from sysid_nn._engine import _least_squares as least_squares
+from sysid_nn._engine._least_squares import with_intercept
+
 #: Output and input lags of the linear one-step model whose residuals give
 #: the noise level.
 _NOISE_LAGS = 3
@@ -75,11 +78,18 @@ def one_step_misfit(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
     p = Y.shape[1]
     if len(rows) <= (na * p + nb * U.shape[1] + 1) * 2:
         return np.zeros(p), np.zeros(p), np.zeros(p)
-    blocks = [Y[rows - i] for i in range(1, na + 1)]
-    blocks += [U[rows - delay - j] for j in range(nb)]
-    design = np.hstack([*blocks, np.ones((len(rows), 1))])
-    theta, *_ = np.linalg.lstsq(design, Y[rows], rcond=None)
-    resid = Y[rows] - design @ theta
+
+    def regressors(r):
+        lagged = [Y[r - i] for i in range(1, na + 1)]
+        return np.hstack(lagged + [U[r - delay - j] for j in range(nb)])
+
+    blocks = list(least_squares.row_blocks(len(rows)))
+    theta, _ = least_squares.solve(
+        (with_intercept(regressors(rows[s])), Y[rows[s]]) for s in blocks
+    )
+    resid = np.vstack(
+        [Y[rows[s]] - with_intercept(regressors(rows[s])) @ theta for s in blocks]
+    )
     var = np.empty(p)
     for k in range(p):
         a = theta[k : na * p : p, k]  # own-output AR coefficients
@@ -93,13 +103,21 @@ def one_step_misfit(Y: np.ndarray, U: np.ndarray, starts, h: int, delay: int):
     # The share of the residual that squares and cubes of the regressors
     # explain: a non-linearity's misfit is a function of them, white
     # measurement noise is not.
-    lagged = design[:, :-1]
-    curved = np.hstack([design, lagged**2, lagged**3])
-    if len(rows) > 2 * curved.shape[1]:
-        beta, *_ = np.linalg.lstsq(curved, resid, rcond=None)
-        rest = resid - curved @ beta
+
+    def curved(r):
+        lagged = regressors(r)
+        return np.hstack([with_intercept(lagged), lagged**2, lagged**3])
+
+    n_curved = 3 * (na * p + nb * U.shape[1]) + 1
+    if len(rows) > 2 * n_curved:
+        _, products = least_squares.solve((curved(rows[s]), resid[s]) for s in blocks)
+        # The rest has zero mean (the intercept): its variance is its
+        # mean square.
         explained = 1.0 - np.divide(
-            rest.var(axis=0), den / len(rows), out=np.ones(p), where=den > 0
+            np.diag(products) / len(rows),
+            den / len(rows),
+            out=np.ones(p),
+            where=den > 0,
         )
     else:
         explained = np.zeros(p)

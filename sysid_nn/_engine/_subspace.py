@@ -17,10 +17,23 @@ import numpy as np
 from scipy.linalg import solve_discrete_are
 from sklearn.utils import Bunch
 
+from sysid_nn._engine import _least_squares as least_squares
 from sysid_nn._kernels._linear import linear_free_run
 
 #: Past and future horizon (samples) of the block-Hankel matrices.
 HORIZON = 50
+#: A linear model counts as stable when its poles lie at least this far
+#: inside the unit circle. A pole closer than that is an integrator on any
+#: record (its response falls by 1e-4 over 1e5 samples), and which side of
+#: the circle it lands on is rounding: a fourth-order test system's fifth
+#: mode came out at 1 - 6e-13 and 1 + 5e-14 from two exact factorisations of
+#: the same projection, which decided whether that order was a candidate.
+UNIT_MARGIN = 1e-9
+
+
+def is_stable(A: np.ndarray) -> bool:
+    """Whether every pole of ``A`` lies :data:`UNIT_MARGIN` inside the unit circle."""
+    return bool(np.abs(np.linalg.eigvals(A)).max() < 1.0 - UNIT_MARGIN)
 
 
 def _hankel(a: np.ndarray, first: int, rows: int, cols: int) -> np.ndarray:
@@ -29,19 +42,31 @@ def _hankel(a: np.ndarray, first: int, rows: int, cols: int) -> np.ndarray:
     return a[idx].transpose(0, 2, 1).reshape(rows * a.shape[1], cols)
 
 
-def _windows(Y, U, horizon):
-    """Past windows, future inputs and outputs of every record, side by side."""
-    past, u_future, y_future = [], [], []
+def _blocks(n_cols: int):
+    """``(first, count)`` of consecutive blocks of windows (see
+    :mod:`~sysid_nn._engine._least_squares`): the projection and the state
+    estimates go block by block, so that their memory does not grow with
+    the records (a 10^5-sample record's whole matrices took 400 MB)."""
+    for rows in least_squares.row_blocks(n_cols):
+        yield rows.start, rows.stop - rows.start
+
+
+def _windows(Y, U, horizon: int, constant: bool):
+    """Blocks of windows of every record, one row per window.
+
+    A row holds the past inputs, the past outputs, the future inputs, a
+    constant with ``constant``, and the future outputs.
+    """
     for y, u in zip(Y, U, strict=True):
-        cols = len(y) - 2 * horizon + 1
-        if cols < 1:
-            continue
-        past.append(
-            np.vstack([_hankel(u, 0, horizon, cols), _hankel(y, 0, horizon, cols)])
-        )
-        u_future.append(_hankel(u, horizon, horizon, cols))
-        y_future.append(_hankel(y, horizon, horizon, cols))
-    return np.hstack(past), np.hstack(u_future), np.hstack(y_future)
+        for first, cols in _blocks(len(y) - 2 * horizon + 1):
+            rows = [
+                _hankel(u, first, horizon, cols),
+                _hankel(y, first, horizon, cols),
+                _hankel(u, first + horizon, horizon, cols),
+                *([np.ones((1, cols))] if constant else []),
+                _hankel(y, first + horizon, horizon, cols),
+            ]
+            yield np.vstack(rows).T
 
 
 def subspace_model(
@@ -82,14 +107,21 @@ def projection(Y, U, horizon: int = HORIZON, constant: bool = False) -> Bunch:
     ``constant``, the projection is also along a constant, which otherwise
     shows as one more state (an offset of the records).
     """
-    past, u_future, y_future = _windows(Y, U, horizon)
+    m, p = U[0].shape[1], Y[0].shape[1]
+    n_past = horizon * (m + p)
+    n_design = n_past + horizon * m + int(constant)
     # Oblique projection of the future outputs along the future inputs onto
-    # the past: the least-squares coefficients of the past.
-    along = [u_future, np.ones((1, past.shape[1]))] if constant else [u_future]
-    design = np.vstack([past, *along])
-    coef = np.linalg.lstsq(design.T, y_future.T, rcond=None)[0].T
-    L_past = coef[:, : past.shape[0]]
-    left, sv, _ = np.linalg.svd(L_past @ past, full_matrices=False)
+    # the past: the least-squares coefficients of the past, from the
+    # triangular factor of [past, along, future] (as N4SID's LQ does).
+    R = least_squares.triangular_factor(_windows(Y, U, horizon, constant))
+    R11, R12 = R[:n_design, :n_design], R[:n_design, n_design:]
+    n_windows = sum(max(len(y) - 2 * horizon + 1, 0) for y in Y)
+    cut = least_squares.cutoff(n_windows, n_design)
+    coef = np.linalg.lstsq(R11, R12, rcond=cut)[0].T
+    L_past = coef[:, :n_past]
+    # ``L_past @ past`` is ``L_past @ R11[:, :n_past].T`` times orthonormal
+    # rows: the same left singular vectors and values.
+    left, sv, _ = np.linalg.svd(L_past @ R11[:, :n_past].T, full_matrices=False)
     return Bunch(L_past=L_past, left=left, singular_values=sv, horizon=horizon)
 
 
@@ -105,8 +137,15 @@ def model_of_order(Y, U, proj: Bunch, n: int) -> Bunch:
         cols = len(y) - horizon
         if cols < 2:
             continue
-        w = np.vstack([_hankel(u, 0, horizon, cols), _hankel(y, 0, horizon, cols)])
-        x = (observer @ w).T  # state at samples horizon .. N - 1
+        x = np.vstack(
+            [
+                (
+                    observer
+                    @ np.vstack([_hankel(u, a, horizon, k), _hankel(y, a, horizon, k)])
+                ).T
+                for a, k in _blocks(cols)
+            ]
+        )  # state at samples horizon .. N - 1
         x_now.append(x[:-1])
         x_next.append(x[1:])
         u_now.append(u[horizon:-1])
@@ -159,38 +198,62 @@ def output_error_model(Y, U, proj: Bunch, n: int) -> Bunch:
     gamma = proj.left[:, :n] * np.sqrt(proj.singular_values[:n])
     C = gamma[:p]
     A = np.linalg.lstsq(gamma[:-p], gamma[p:], rcond=None)[0]
-    zero_n, zero_b = np.zeros(n), np.zeros((n, m))
-    columns = []  # responses to each entry of B, of c, of every x0
-    for i in range(m):
-        for j in range(n):
-            B = zero_b.copy()
-            B[j, i] = 1.0
-            columns.append([_free_run(A, B, C, zero_n, u, zero_n) for u in U])
-    for j in range(n):
-        c = zero_n.copy()
-        c[j] = 1.0
-        columns.append([_free_run(A, zero_b, C, c, u, zero_n) for u in U])
-    n_rec = len(Y)
-    design = [np.hstack([np.concatenate(col).reshape(-1, 1) for col in columns])]
-    for s in range(n_rec):
-        for j in range(n):
-            x0 = zero_n.copy()
-            x0[j] = 1.0
-            block = [
-                _free_run(A, zero_b, C, zero_n, u, x0)
-                if k == s
-                else np.zeros((len(u), p))
-                for k, u in enumerate(U)
-            ]
-            design.append(np.concatenate(block).reshape(-1, 1))
-    design = np.hstack(design)
-    target = np.concatenate(Y).ravel()
-    ok = np.all(np.isfinite(design), axis=0)
-    theta = np.zeros(design.shape[1])
-    if np.abs(np.linalg.eigvals(A)).max() < 1.0 and ok.all():
-        theta = np.linalg.lstsq(design, target, rcond=None)[0]
+    theta = np.zeros(n * m + n + n * len(Y))
+    if is_stable(A):
+        finite = True
+
+        def rows():
+            nonlocal finite
+            for design, target in _output_error_rows(A, C, Y, U):
+                finite = finite and bool(np.all(np.isfinite(design)))
+                yield design, target
+
+        fit, _ = least_squares.solve(rows())
+        if finite and fit is not None:
+            theta = fit[:, 0]
     B = theta[: n * m].reshape(m, n).T
     return Bunch(A=A, B=B, C=C, c=theta[n * m : n * m + n])
+
+
+def _output_error_rows(A, C, Y, U):
+    """Blocks of rows of the output-error regression, and their targets.
+
+    The columns are the model's free-run responses to each entry of ``B``,
+    of ``c`` and of every record's initial state (zero on the other
+    records), one row per sample and output: linear in those entries, so
+    the free run is their least-squares combination. The responses run
+    block by block, each from the states the previous block ended in, so
+    that only one block of them is held.
+    """
+    n, p, m = A.shape[0], C.shape[0], U[0].shape[1]
+    eye = np.eye(n)
+    # Each column's (B, c) of the input and constant terms.
+    terms = [
+        (np.outer(eye[j], np.eye(m)[i]), np.zeros(n))
+        for i in range(m)
+        for j in range(n)
+    ]
+    terms += [(np.zeros((n, m)), eye[j]) for j in range(n)]
+    n_init = n * len(Y)
+    # Outputs and states of every step: the state a block ends in starts
+    # the next one, as in one run over the whole record.
+    observed = np.vstack([C, eye])
+    zero_b, zero_c = np.zeros((n, m)), np.zeros(n)
+    for s, (y, u) in enumerate(zip(Y, U, strict=True)):
+        states = np.zeros((len(terms) + n, n))
+        states[len(terms) :] = eye  # the initial-state columns start at e_j
+        for rows in least_squares.row_blocks(len(y)):
+            first, last = rows.start, rows.stop
+            ahead = min(last + 1, len(y))  # one more step: the next start
+            block = np.zeros((last - first, p, len(terms) + n_init))
+            for k in range(len(terms) + n):
+                B, c = terms[k] if k < len(terms) else (zero_b, zero_c)
+                out = _free_run(A, B, observed, c, u[first:ahead], states[k])
+                col = k if k < len(terms) else len(terms) + s * n + (k - len(terms))
+                block[:, :, col] = out[: last - first, :p]
+                if ahead > last:
+                    states[k] = out[-1, p:]
+            yield block.reshape(-1, block.shape[2]), y[rows].reshape(-1, 1)
 
 
 def _free_run(A, B, C, c, u, x0):

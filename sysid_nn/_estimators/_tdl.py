@@ -8,8 +8,10 @@ from math import comb
 import numpy as np
 from sklearn.utils._param_validation import Interval, StrOptions
 
+from sysid_nn._engine import _least_squares as least_squares
 from sysid_nn._engine._issm_start import ARX_LAGS, order_lags
 from sysid_nn._engine._layout import MLPLayout
+from sysid_nn._engine._least_squares import with_intercept
 from sysid_nn._engine._order import tdl_auto_width
 from sysid_nn._engine._shooting import _FreeStateObjective
 from sysid_nn._engine._state_estimation import lowpass
@@ -482,13 +484,17 @@ such, default=None
         integrating structure keeps its pole at one.
         """
         na, p = self.output_lags_, self.n_outputs_
-        design = np.hstack([Z, np.ones((len(Z), 1))])
+        n_cols = Z.shape[1] + 1
         for k in range(na, -1, -1):
             # Columns of output lags beyond k (plain lags, or differences of
             # order k and more, which read lags beyond k) are left out.
-            keep = np.r_[np.arange(k * p), np.arange(na * p, design.shape[1])]
-            theta = np.zeros((design.shape[1], p))
-            theta[keep], *_ = np.linalg.lstsq(design[:, keep], target, rcond=None)
+            keep = np.r_[np.arange(k * p), np.arange(na * p, Z.shape[1])]
+            theta = np.zeros((n_cols, p))
+            fit, _ = least_squares.solve(
+                (with_intercept(Z[rows][:, keep]), target[rows])
+                for rows in least_squares.row_blocks(len(Z))
+            )
+            theta[np.r_[keep, n_cols - 1]] = fit
             if n * np.log(self._arx_radius(theta) + 1e-300) <= np.log(_ARX_GROWTH):
                 break
         return theta
