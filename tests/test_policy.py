@@ -12,8 +12,10 @@ import warnings
 import numpy as np
 import pytest
 from scipy.signal import lfilter
+from test_engine import _oscillator_records as _records
+from test_engine import _small
 
-from sysid_nn import HystereticOscillator, ISSMRegressor, TDLRegressor
+from sysid_nn import ISSMRegressor, TDLRegressor
 from sysid_nn._analysis._uncertainty import (
     _delta_covariance,
     _Normal,
@@ -23,26 +25,6 @@ from sysid_nn._engine import _training
 from sysid_nn._engine._selection import validation_loss
 from sysid_nn._engine._solvers import _EarlyStop
 from sysid_nn._records._data import _FREE_RUN
-
-
-def _records(n, seed=0, n_samples=500):
-    rec = HystereticOscillator(r0=0.05).generate(
-        n, n_samples=n_samples, random_state=seed
-    )
-    return [f[:, None] for f in rec.excitation], list(rec.displacement)
-
-
-def _small(**params):
-    base = dict(
-        output_lags=3,
-        input_lags=3,
-        hidden_layer_sizes=(3,),
-        n_init=2,
-        max_iter=8,
-        shooting_segments=(20,),
-        random_state=0,
-    )
-    return TDLRegressor(**{**base, **params})
 
 
 def _fit(model, *args, **kwargs):
