@@ -29,6 +29,7 @@ _LAZY = {
     "InconsistentVersionWarning": "sysid_nn._exceptions",
     "UnstablePredictorWarning": "sysid_nn._issm",
     "load_model": "sysid_nn._saved",
+    "save_model": "sysid_nn._saved",
 }
 
 __all__ = [
@@ -40,6 +41,7 @@ __all__ = [
     "TDLRegressor",
     "UnstablePredictorWarning",
     "load_model",
+    "save_model",
 ]
 
 

@@ -1,10 +1,10 @@
 """Tests of the ``sysid-nn reproduce``, ``fit`` and ``validate`` commands."""
 
-import joblib
 import numpy as np
 import pandas as pd
 import pytest
 
+from sysid_nn._saved import _read_bundle
 from sysid_nn.cli import main
 from sysid_nn.study import FIGURES
 
@@ -135,12 +135,12 @@ TINY_FIT = ["--n-init", "1", "--max-iter", "5", "--dt", "0.01"]
 
 def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     (a, b), many = records
-    model = tmp_path / "model.joblib"
+    model = tmp_path / "model.sysid"
     argv = ["fit", str(a), str(b), "--input", "force", "--output", "displacement"]
     argv += ["--hidden", "3", "--output-lags", "2", "--input-lags", "2", *TINY_FIT]
     assert main([*argv, "--save", str(model)]) == 0
     assert "fitted TDL" in capsys.readouterr().out
-    bundle = joblib.load(model)
+    bundle = _read_bundle(model)
     assert bundle.model.inputs == ("force",) and bundle.dt == 0.01
     assert bundle.model.estimator.get_params()["hidden_layer_sizes"] == (3,)
 
@@ -187,27 +187,27 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
 
 def test_fit_with_validation_files(records, tmp_path, capsys):
     (a, b), _ = records
-    model = tmp_path / "model.joblib"
+    model = tmp_path / "model.sysid"
     argv = ["fit", str(a), "--val", str(b), "--input", "force"]
     argv += ["--output", "displacement", "--hidden", "3", *TINY_FIT]
     assert main([*argv, "--save", str(model)]) == 0
     assert "on 1 experiment(s)" in capsys.readouterr().out
-    estimator = joblib.load(model).model.estimator
+    estimator = _read_bundle(model).model.estimator
     # The validation file selected the weights.
     assert estimator.best_validation_score_ is not None
     missing = ["fit", str(a), "--val", str(tmp_path / "none.csv"), "--input", "force"]
-    missing += ["--output", "displacement", "--save", str(tmp_path / "other.joblib")]
+    missing += ["--output", "displacement", "--save", str(tmp_path / "other.sysid")]
     assert main(missing) == 1
     assert "none.csv" in _one_error_line(capsys)
 
 
 def test_fit_issm_two_outputs(records, tmp_path, capsys):
     (a, _), _ = records
-    model = tmp_path / "issm.joblib"
+    model = tmp_path / "issm.sysid"
     argv = ["fit", str(a), "--input", "force", "--output", "displacement"]
     argv += ["--output", "velocity", "--model", "issm", "--n-states", "3", *TINY_FIT]
     assert main([*argv, "--save", str(model)]) == 0
-    est = joblib.load(model).model.estimator
+    est = _read_bundle(model).model.estimator
     assert est.n_outputs_ == 2 and est.n_states_ == 3
     capsys.readouterr()
 
@@ -271,10 +271,10 @@ def test_missing_files_exit_1_with_one_line(records, tmp_path, capsys):
     argv = ["fit", str(tmp_path / "none.csv"), "--input", "force", "--output", "x"]
     assert main([*argv, "--save", str(tmp_path / "m")]) == 1
     assert "cannot read" in _one_error_line(capsys)
-    junk = tmp_path / "junk.joblib"
+    junk = tmp_path / "junk.sysid"
     junk.write_text("not a model")
     (a, _), _ = records
     argv = ["validate", "--model", str(junk), str(a), "--out", str(tmp_path / "v")]
     assert main(argv) == 1
-    assert "cannot read" in _one_error_line(capsys)
+    assert "is not a model file" in _one_error_line(capsys)
     assert not (tmp_path / "v").exists()

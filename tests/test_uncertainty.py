@@ -329,7 +329,7 @@ def test_cli_validate_draws_and_reports_bands(tmp_path, capsys):
     train, new = tmp_path / "train.csv", tmp_path / "new.csv"
     frames[0].to_csv(train, index=False)
     pd.concat(frames[1:]).to_csv(new, index=False)
-    model = tmp_path / "model.joblib"
+    model = tmp_path / "model.sysid"
     argv = ["fit", str(train), "--input", "force", "--output", "x", "--hidden", "0"]
     argv += ["--output-lags", "2", "--input-lags", "1", "--n-init", "1"]
     assert main([*argv, "--dt", "0.01", "--save", str(model)]) == 0

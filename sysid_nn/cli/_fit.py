@@ -16,6 +16,7 @@ from sysid_nn.cli._common import (
     _command,
     _InputError,
     _one_line,
+    _OutputError,
     _positive_float,
     _positive_int,
     _score_lines,
@@ -124,7 +125,14 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
             "validation_fraction)"
         ),
     )
-    p.add_argument("--save", type=Path, required=True, metavar="FILE", help="model")
+    p.add_argument(
+        "--save",
+        type=Path,
+        required=True,
+        metavar="FILE",
+        help="model file (e.g. model.sysid; data only, no code: see "
+        "sysid_nn.load_model)",
+    )
     _add_output_flags(p, "--save file")
     p.add_argument(
         "--verbose",
@@ -172,11 +180,8 @@ def _holdout(records: _Records, val: _Records | None):
 
 
 def _run_fit(args: argparse.Namespace) -> int:
-    import joblib
-    from sklearn.utils import Bunch
-
-    from sysid_nn import __version__
     from sysid_nn._compile import prepare_kernels
+    from sysid_nn._saved import _write
     from sysid_nn._sensitivity import chaos_hint
     from sysid_nn.study import StudyModel
 
@@ -186,6 +191,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     estimator, params = _estimator(args)
     sources = [*args.files, *(args.val or [])]
     _check_output(args.save, "--save", overwrite=args.overwrite, inputs=sources)
+    _check_replaces_model(args.save)
     read = (args.split_by, args.time_column, args.sep, args.decimal)
     records = _read_records(args.files, [*inputs, *outputs], *read)
     val = _read_records(args.val, [*inputs, *outputs], *read) if args.val else None
@@ -232,20 +238,16 @@ def _run_fit(args: argparse.Namespace) -> int:
     messages.append(chaos_hint(estimator, longest))
     for message in dict.fromkeys(m for m in messages if m):
         print(f"{_PROG}: warning: {message}", file=sys.stderr)
-    bundle = Bunch(
-        model=model,
-        dt=dt,
-        units=units,
-        files=[str(f) for f in args.files],
-        split_by=args.split_by,
-        sysid_nn_version=__version__,
-    )
-
-    def dump(tmp: Path) -> None:
-        with open(tmp, "wb") as f:
-            joblib.dump(bundle, f)
-
-    _write_atomic(args.save, dump)
+    info = {
+        "inputs": list(inputs),
+        "outputs": list(outputs),
+        "dt": dt,
+        "units": units,
+        "files": [str(f) for f in args.files],
+        "split_by": args.split_by,
+        "label": model.label,
+    }
+    _write_atomic(args.save, lambda tmp: _write(tmp, estimator, info))
     print(
         f"fitted {model.label} in {estimator.fit_time_:.1f} s: trained on "
         f"{len(X_fit)} experiment(s), weights chosen by early stopping "
@@ -259,6 +261,17 @@ def _run_fit(args: argparse.Namespace) -> int:
     )
     print("\n".join(_score_lines(scores, outputs, units)))
     return 0
+
+
+def _check_replaces_model(path: Path) -> None:
+    """``--overwrite`` replaces a model file only, never data or anything else."""
+    from sysid_nn._saved import _is_model_file
+
+    if path.is_file() and not _is_model_file(path):
+        raise _OutputError(
+            f"{path} exists and is not a model file; --overwrite replaces only "
+            "models saved by `sysid-nn fit --save`. Choose another --save."
+        )
 
 
 def _fit(estimator, X, y, X_val, y_val, files, inputs, outputs) -> None:

@@ -38,7 +38,13 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
         type=Path,
         required=True,
         metavar="FILE",
-        help="model saved by `sysid-nn fit --save`",
+        help="model saved by `sysid-nn fit --save` or sysid_nn.save_model",
+    )
+    p.add_argument(
+        "--trust-pickle",
+        action="store_true",
+        help="also load a pickle (joblib) model file, as earlier versions saved; "
+        "unpickling runs any code the file holds, so only for files you trust",
     )
     _data_arguments(p)
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="directory")
@@ -81,18 +87,18 @@ _band_level = _bounded(
 )
 
 
-def _load_model(path: Path):
+def _load_model(path: Path, trusted: bool = False):
     from sysid_nn._saved import _read_bundle
 
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", UserWarning)
-            bundle = _read_bundle(path)
+            bundle = _read_bundle(path, trusted=trusted)
     except OSError as exc:
         raise _InputError(f"cannot read {path}: {_reason(exc)}") from None
     except ValueError as exc:
         raise _InputError(str(exc)) from None
-    for w in caught:  # the version stamp: one line, not a source excerpt
+    for w in caught:  # version stamp, pickle: one line, not a source excerpt
         print(f"{_PROG}: warning: {w.message}", file=sys.stderr)
     return bundle
 
@@ -121,7 +127,7 @@ def _run_validate(args: argparse.Namespace) -> int:
     from sysid_nn._sensitivity import chaos_hint
     from sysid_nn.study import run_validation
 
-    bundle = _load_model(args.model)
+    bundle = _load_model(args.model, args.trust_pickle)
     model = bundle.model
     sources = [args.model, *args.files]
     _check_output(
@@ -136,7 +142,7 @@ def _run_validate(args: argparse.Namespace) -> int:
         args.decimal,
     )
     dt = _resolve_dt(args.dt, records, fallback=bundle.dt)
-    if abs(dt - bundle.dt) > _DT_TOLERANCE * bundle.dt:
+    if bundle.dt is not None and abs(dt - bundle.dt) > _DT_TOLERANCE * bundle.dt:
         raise _InputError(
             f"{records.dt_origin or '--dt'} gives dt = {dt:g} s, but {args.model} "
             f"was fitted at dt = {bundle.dt:g} s; a model only applies at the "
@@ -166,7 +172,8 @@ def _run_validate(args: argparse.Namespace) -> int:
         n_jobs=args.n_jobs,
         units=units,
         setup=[
-            f"Model: {args.model}, fitted on {', '.join(bundle.files)}.",
+            f"Model: {args.model}"
+            + (f", fitted on {', '.join(bundle.files)}." if bundle.files else "."),
             f"Validation data: {', '.join(map(str, args.files))}"
             + (f", split by {args.split_by!r}." if args.split_by else "."),
             *([f"Warning: {hint[0].upper()}{hint[1:]}"] if hint else []),
