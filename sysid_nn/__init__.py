@@ -30,6 +30,8 @@ _LAZY = {
     "UnstablePredictorWarning": "sysid_nn._issm",
     "load_model": "sysid_nn._saved",
     "save_model": "sysid_nn._saved",
+    "export_onnx": "sysid_nn._export",
+    "to_dlti": "sysid_nn._export",
 }
 
 __all__ = [
@@ -40,8 +42,10 @@ __all__ = [
     "ShearBuilding",
     "TDLRegressor",
     "UnstablePredictorWarning",
+    "export_onnx",
     "load_model",
     "save_model",
+    "to_dlti",
 ]
 
 
