@@ -248,6 +248,29 @@ def test_an_input_that_never_changes_is_rejected(files, tmp_path, capsys):
     assert not (tmp_path / "m.sysid").exists()
 
 
+def test_an_output_that_never_changes_is_rejected(files, tmp_path, capsys):
+    flat = tmp_path / "flat.csv"
+    pd.read_csv(files[0]).assign(displacement=1.5).to_csv(flat, index=False)
+    assert _fit([flat], tmp_path / "m.sysid") == 1
+    line = _error(capsys)
+    assert "output column 'displacement' holds the single value 1.5" in line
+    assert "--output" in line and not (tmp_path / "m.sysid").exists()
+
+
+def test_records_too_short_for_the_model_are_rejected(files, tmp_path, capsys):
+    short = tmp_path / "short.csv"
+    pd.read_csv(files[0]).head(10).to_csv(short, index=False)
+    # 10 rows, 2 output and 2 input lags, 2 hidden units: 8 modelled samples
+    # for 17 weights (found once the fit has resolved the structure).
+    assert _fit([short], tmp_path / "m.sysid", "--quiet") == 1
+    line = _error(capsys)
+    assert "too short for the model: 8 modelled output sample(s)" in line
+    assert "for 17 weights" in line and not (tmp_path / "m.sysid").exists()
+    # The linear model with one lag of each (3 weights) fits them.
+    linear = ["--hidden", "0", "--output-lags", "1", "--input-lags", "1"]
+    assert _fit([short], tmp_path / "m.sysid", *linear, "--quiet") == 0
+
+
 def test_help_shows_every_default(capsys):
     parser = build_parser()
     (commands,) = [
@@ -320,7 +343,7 @@ def test_validate_reports_every_output_with_units(frame, tmp_path, capsys, monke
     argv = ["fit", str(table), "--split-by", "realization", "--input", "force"]
     argv += ["--output", "displacement [m]", "--output", "velocity (m/s)"]
     argv += ["--model", "issm", "--n-init", "1", "--max-iter", "3"]
-    assert main([*argv, "--units", "force=kN", "--save", str(model), "--quiet"]) == 0
+    assert main([*argv, "--units", "force=kN", "--save", str(model)]) == 0
     assert _read_bundle(model).units == {
         "force": "kN",
         "displacement [m]": "m",
@@ -438,7 +461,10 @@ def test_fit_progress_lines_and_closing_line(files, tmp_path, capsys):
     assert "exp2.csv" in closing[0] and "R^2" not in captured.out
     assert closing[1].strip().startswith("displacement: prediction NRMSE")
     assert _fit(files, tmp_path / "q.sysid", "--quiet") == 0
-    assert "restart" not in capsys.readouterr().err
+    # Quiet: no progress, no summary; only warnings are left, one line each.
+    quiet = capsys.readouterr()
+    assert quiet.out == ""
+    assert all(line.startswith("sysid-nn: warning:") for line in quiet.err.splitlines())
 
 
 def test_fit_single_record_scores_its_held_out_tail(files, tmp_path, capsys):

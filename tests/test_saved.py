@@ -208,3 +208,20 @@ def test_other_files_are_not_models(tmp_path):
         z.writestr("a.txt", "hello")
     with pytest.raises(ValueError, match="zip archive but not a model file"):
         load_model(archive)
+
+
+def test_a_model_of_another_version_warns_on_load(fitted_models, tmp_path):
+    import warnings
+
+    from sysid_nn import InconsistentVersionWarning
+
+    est, _, _ = fitted_models["linear", 1]
+    path = tmp_path / "model.sysid"
+    save_model(est, path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", InconsistentVersionWarning)
+        load_model(path)
+    _rewrite_header(path, lambda h: h.update(sysid_nn_version="0.0.1"))
+    with pytest.warns(InconsistentVersionWarning, match="model.sysid was saved"):
+        _, info = load_model(path, with_info=True)
+    assert info.sysid_nn_version == "0.0.1"

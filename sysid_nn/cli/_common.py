@@ -75,7 +75,11 @@ def _add_output_flags(p: argparse.ArgumentParser, what: str) -> None:
         action="store_true",
         help=f"replace an existing {what} (never one of the inputs)",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress or summary")
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress or summary: nothing but warnings and errors (stderr)",
+    )
 
 
 # ------------------------------------------------------------------ outputs

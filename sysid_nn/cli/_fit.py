@@ -26,7 +26,7 @@ from sysid_nn.cli._common import (
 )
 from sysid_nn.cli._records import (
     _check_columns,
-    _check_inputs_vary,
+    _check_columns_vary,
     _data_arguments,
     _frame_path,
     _read_records,
@@ -195,7 +195,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     read = (args.split_by, args.time_column, args.sep, args.decimal)
     records = _read_records(args.files, [*inputs, *outputs], *read)
     val = _read_records(args.val, [*inputs, *outputs], *read) if args.val else None
-    _check_inputs_vary(records, inputs)
+    _check_columns_vary(records, inputs, outputs)
     dt = _resolve_dt(args.dt, records)
     if val is not None:
         _resolve_dt(dt, val, source="the training files' dt")
@@ -218,6 +218,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         _fit(estimator, X_fit, y_fit, X_val, y_val, sources, inputs, outputs)
+        _check_enough_samples(estimator, X_fit, args.files)
         if X_val is not None:
             scores = _scores(estimator, X_val, y_val)
             where = f"{len(X_val)} experiment(s) ({', '.join(held_names)})"
@@ -248,6 +249,8 @@ def _run_fit(args: argparse.Namespace) -> int:
         "label": model.label,
     }
     _write_atomic(args.save, lambda tmp: _write(tmp, estimator, info))
+    if args.quiet:  # warnings only (above), no summary
+        return 0
     print(
         f"fitted {model.label} in {estimator.fit_time_:.1f} s: trained on "
         f"{len(X_fit)} experiment(s), weights chosen by early stopping "
@@ -261,6 +264,26 @@ def _run_fit(args: argparse.Namespace) -> int:
     )
     print("\n".join(_score_lines(scores, outputs, units)))
     return 0
+
+
+def _check_enough_samples(estimator, X: list, files) -> None:
+    """Refuse a fit with no more modelled samples than weights.
+
+    With as many weights as equations a model fits its records exactly,
+    whatever they hold, and its training scores mean nothing.
+    """
+    reach = estimator._history_length()
+    n_equations = estimator.n_outputs_ * sum(max(0, len(x) - reach) for x in X)
+    n_weights = estimator.coefs_.size
+    if n_equations <= n_weights:
+        raise _InputError(
+            f"the training records ({', '.join(map(str, files))}) are too short "
+            f"for the model: {n_equations} modelled output sample(s) after the "
+            f"first {reach} (the reach of its lags) for {n_weights} weights, so it "
+            "would fit them exactly whatever they hold. Give longer or more "
+            "records, or a smaller model (fewer --hidden units, lags or "
+            "--n-states); nothing was saved."
+        )
 
 
 def _check_replaces_model(path: Path) -> None:
