@@ -147,7 +147,10 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     out = tmp_path / "validation"
     argv = ["validate", "--model", str(model), str(many), "--split-by", "realization"]
     assert main([*argv, "--out", str(out), "--max-lag", "10", "--quiet"]) == 0
-    expected = {*list(FIGURES)[1:7], "results.csv", "summary.csv", "report.md"}
+    # The user's own figure names, not the paper's fig4_x numbering.
+    figures = [name.split("_", 2)[2] for name in list(FIGURES)[1:7]]
+    assert figures[0] == "prediction.png"
+    expected = {*figures, "results.csv", "summary.csv", "report.md"}
     assert {p.name for p in out.iterdir()} == expected | {"series.csv"}
     results = pd.read_csv(out / "results.csv")
     assert sorted(set(results["record"])) == [0, 1]
@@ -174,6 +177,9 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     own = report.replace("split by 'realization'", "")  # the user's column
     for paper in ("section 4.", "eq. 19", "N_s", "realisation", "realization"):
         assert paper not in own, paper
+    for paper in ("μ_", "σ_", "fig4_", "fig. 4", "figs 4"):
+        assert paper not in own, paper
+    assert "![Mean error and error std of prediction errors](" in report
     assert "The model's one-step residuals" in report
     assert "Some models'" not in report
     # Loading the saved model in Python is one public call.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -180,6 +181,9 @@ def _statistics_figure(data, evaluation, mode, title) -> Any:
             title=title if len(outputs) == 1 else f"{title}: {_label(data, field)}",
             ax=ax,
         )
+        if not data.get("paper_terms", True):  # a user's records: plain names
+            handles, _ = ax.get_legend_handles_labels()
+            ax.legend(handles, ["mean error", "error std"])
     return fig
 
 
@@ -317,6 +321,26 @@ FIGURES = {
 }
 
 
+#: The paper's names of the error statistics and the plain ones of a report
+#: on a user's own records (as in the report's tables).
+_PLAIN_STATISTICS = ("μ_Ns and σ_Ns of", "Mean error and error std of")
+
+
+def figure_caption(name: str, paper_terms: bool = True) -> str:
+    """The caption of figure ``name``; without the paper's figure numbers and
+    notation for a report on a user's own records."""
+    caption = FIGURES[name]
+    if paper_terms:
+        return caption
+    return re.sub(r" \(figs?\. [^)]*\)", "", caption).replace(*_PLAIN_STATISTICS)
+
+
+def figure_file(name: str, paper_terms: bool = True) -> str:
+    """The file name of figure ``name``: ``prediction.png`` rather than the
+    paper's ``fig4_2_prediction.png`` for a user's own records."""
+    return name if paper_terms else re.sub(r"^fig\d+_\d+_", "", name)
+
+
 def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
     """Figure builders by file name; those needing absent data are left out."""
     from sysid_nn.plotting import plot_records
@@ -334,6 +358,7 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
         )
 
     names = list(FIGURES)
+    paper = data.get("paper_terms", True)
     builders = {
         names[1]: lambda: _response_figure(
             models, data, evaluation, "prediction", "Prediction"
@@ -341,13 +366,13 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
         names[2]: lambda: _correlation_figure(models, data, evaluation, "acf"),
         names[3]: lambda: _correlation_figure(models, data, evaluation, "ccf"),
         names[4]: lambda: _statistics_figure(
-            data, evaluation, "prediction", FIGURES[names[4]]
+            data, evaluation, "prediction", figure_caption(names[4], paper)
         ),
         names[5]: lambda: _response_figure(
             models, data, evaluation, "simulation", "Simulation"
         ),
         names[6]: lambda: _statistics_figure(
-            data, evaluation, "simulation", FIGURES[names[6]]
+            data, evaluation, "simulation", figure_caption(names[6], paper)
         ),
     }
     if "train" in data:

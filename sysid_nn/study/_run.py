@@ -24,6 +24,7 @@ from sysid_nn.study._figures import (
     LONG_RECORD,
     _figures,
     _label,
+    figure_file,
     hysteresis_loops,
     show_long_record,
 )
@@ -113,8 +114,9 @@ def _write_outputs(
     )
     summary.rename(columns=renamed or {}).to_csv(tmp / "summary.csv", index=False)
     builders = _figures(models, data, evaluation, loops)
+    paper = data.get("paper_terms", True)
     for name, build in _progress(builders.items(), len(builders), "figures", progress):
-        build().savefig(tmp / name, dpi=90)
+        build().savefig(tmp / figure_file(name, paper), dpi=90)
     return summary, list(builders)
 
 
@@ -326,8 +328,13 @@ def run_validation(
     if series == "parquet":
         _check_parquet()
     models = {model.label: model}
+    # A user's records: plain names, no paper's notation or figure numbers.
     data = Bunch(
-        test=records, dt=float(dt), units=dict(units or {}), record_name="record"
+        test=records,
+        dt=float(dt),
+        units=dict(units or {}),
+        record_name="record",
+        paper_terms=False,
     )
     prepare_kernels(show=progress)
     with _staged_directory(out_dir, overwrite) as tmp:
