@@ -284,3 +284,32 @@ def test_missing_files_exit_1_with_one_line(records, tmp_path, capsys):
     assert main(argv) == 1
     assert "is not a model file" in _one_error_line(capsys)
     assert not (tmp_path / "v").exists()
+
+
+def test_validate_reports_predictions_that_turn_non_finite(records, tmp_path, capsys):
+    (a, b), _ = records
+    model = tmp_path / "model.sysid"
+    argv = ["fit", str(a), "--input", "force", "--output", "displacement"]
+    argv += ["--hidden", "0", "--output-lags", "2", "--input-lags", "2", *TINY_FIT]
+    assert main([*argv, "--save", str(model), "--quiet"]) == 0
+    # A glitch in the measured output at sample 231: the one-step predictor,
+    # fed the measurement, leaves the range from the next sample on.
+    glitch = tmp_path / "glitch.csv"
+    frame = pd.read_csv(b)
+    frame.loc[231, "displacement"] = 1e12
+    frame.to_csv(glitch, index=False)
+    out = tmp_path / "validation"
+    argv = ["validate", "--model", str(model), str(glitch), "--max-lag", "10"]
+    assert main([*argv, "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert (
+        "warning: The one-step predictions of 'displacement' on "
+        f"{glitch} are not finite from sample 232" in err
+    )
+    assert "free run" not in err  # the free run does not read the outputs
+    report = (out / "report.md").read_text()
+    assert "## Warnings" in report
+    assert "on record 0 are not finite from sample 232" in report
+    # A clean record: no warning.
+    assert main([*argv[:3], str(b), *argv[4:], "--out", str(out), "--overwrite"]) == 0
+    assert "not finite" not in capsys.readouterr().err

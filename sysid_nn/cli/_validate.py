@@ -126,6 +126,7 @@ def _run_validate(args: argparse.Namespace) -> int:
     from sysid_nn._compile import prepare_kernels
     from sysid_nn._sensitivity import chaos_hint
     from sysid_nn.study import run_validation
+    from sysid_nn.study._run import _WIDE_BAND, describe_non_finite, wide_band_warning
 
     bundle = _load_model(args.model, args.trust_pickle)
     model = bundle.model
@@ -182,6 +183,13 @@ def _run_validate(args: argparse.Namespace) -> int:
         series=series,
         band=args.band,
     )
+    for entry in result.non_finite:
+        record = f"{records.origins[entry.record]}"
+        warning = describe_non_finite(entry, record)
+        print(f"{_PROG}: warning: {warning}", file=sys.stderr)
+    if result.band_width is not None and result.band_width > _WIDE_BAND:
+        warning = wide_band_warning(result.band_width)
+        print(f"{_PROG}: warning: {warning}", file=sys.stderr)
     if not args.quiet:
         X, y = model.arrays(records.columns)
         print(
@@ -198,7 +206,8 @@ def _run_validate(args: argparse.Namespace) -> int:
         if args.band is not None:
             print(
                 f"{100 * args.band:g} % prediction band of the free run covers "
-                f"{100 * result.band_coverage:.1f} % of the samples (band.csv, "
-                "band_<k>.png)"
+                f"{100 * result.band_coverage:.1f} % of the samples; its standard "
+                f"deviation is on average {result.band_width:.2g} times the "
+                "output's (band.csv, band_<k>.png)"
             )
     return 0

@@ -294,8 +294,14 @@ def run_validation(
     -------
     Bunch
         ``out_dir``, ``results``, ``summary``, ``evaluation``, ``series``
-        (the series' DataFrame, or None) and ``band_coverage`` (the pooled
-        share of samples inside the band, or None).
+        (the series' DataFrame, or None), ``band_coverage`` (the pooled
+        share of samples inside the band, or None) and ``band_width`` (the
+        band's mean standard deviation over the output's standard deviation,
+        of the widest output, or None; above 1 the band is flagged as too
+        wide for its coverage to mean much) and ``non_finite``: one Bunch
+        (``record``, ``mode``, ``output``, ``sample``) per record, mode and
+        output whose predictions or free run turned non-finite (diverged),
+        from ``sample`` (counted from 0) on; the report lists them.
 
     Examples
     --------
@@ -341,12 +347,13 @@ def run_validation(
         evaluation = evaluate(
             models, data, config, outputs=model.outputs, progress=progress
         )
+        non_finite = _non_finite(evaluation, model.label)
         renamed = {"realization": "record", "n_realizations": "n_records"}
         summary, figures = _write_outputs(
             tmp, models, data, evaluation, None, progress, renamed
         )
         files = {}
-        table = coverage = None
+        table = coverage = width = None
         if series is not None:
             table = _series(model, records, evaluation, float(dt))
             if series == "csv":
@@ -358,10 +365,12 @@ def run_validation(
                 "(`<output>_predicted`) and free runs (`<output>_simulated`)."
             )
         if band is not None:
-            coverage = _write_bands(model, records, tmp, float(dt), band)
+            coverage, width = _write_bands(model, records, tmp, float(dt), band)
             files["band.csv"] = (
                 f"share of samples inside the {100 * band:g} % prediction band of "
-                f"the free run, per record (pooled: {100 * coverage:.1f} %)."
+                f"the free run, per record (pooled: {100 * coverage:.1f} %), and "
+                "the band's mean standard deviation over the output's."
+                + (f" {wide_band_warning(width)}" if width > _WIDE_BAND else "")
             )
             files["band_<k>.png"] = (
                 "free run of record k with its prediction band, over the "
@@ -387,6 +396,9 @@ def run_validation(
             max_lag=max_lag,
             paper_terms=False,
             files=files,
+            extra={"Warnings": [f"- {describe_non_finite(b)}" for b in non_finite]}
+            if non_finite
+            else None,
         )
     return Bunch(
         out_dir=Path(out_dir),
@@ -395,11 +407,29 @@ def run_validation(
         evaluation=evaluation,
         series=table,
         band_coverage=coverage,
+        band_width=width,
+        non_finite=non_finite,
     )
 
 
-def _write_bands(model, records, out: Path, dt: float, level: float) -> float:
-    """Free runs with their prediction bands: figures, band.csv, pooled coverage."""
+#: A band whose standard deviation exceeds the output's own is flagged: it
+#: is no narrower than the spread of the output about its mean (an NRMSE of
+#: 1), so it covers most samples whatever the model does.
+_WIDE_BAND = 1.0
+
+
+def _band_width(y: list, std: list) -> np.ndarray:
+    """Per output: the band's mean standard deviation over the output's."""
+    Y, S = np.concatenate(y), np.concatenate(std)
+    spread = Y.std(axis=0)
+    return np.nanmean(S, axis=0) / np.where(spread > 0, spread, np.nan)
+
+
+def _write_bands(
+    model, records, out: Path, dt: float, level: float
+) -> tuple[float, float]:
+    """Free runs with their prediction bands: figures, band.csv, the pooled
+    coverage and the widest band's width (see :func:`_band_width`)."""
     import matplotlib.pyplot as plt
 
     from sysid_nn.plotting import plot_band
@@ -407,12 +437,19 @@ def _write_bands(model, records, out: Path, dt: float, level: float) -> float:
 
     X, y = model.arrays(records)
     mean, std = model.estimator.simulate(X, return_std=True)
-    rows, bounds = [], []
+    rows, bounds, stds = [], [], []
     for k, (yk, mk, sk) in enumerate(zip(y, mean, std, strict=True)):
         yk, mk, sk = (np.reshape(a, (len(a), -1)) for a in (yk, mk, sk))
         lower, upper = normal_interval(mk, sk, level)
         bounds.append((yk, lower, upper))
-        rows.append({"record": k, "coverage": interval_coverage(yk, lower, upper)})
+        stds.append(sk)
+        rows.append(
+            {
+                "record": k,
+                "coverage": interval_coverage(yk, lower, upper),
+                "band_std_over_output_std": float(np.max(_band_width([yk], [sk]))),
+            }
+        )
         t = dt * model.step * np.arange(len(yk))
         ax = plot_band(t, mk[:, 0], sk[:, 0], level=level, label="simulated")
         ax.plot(t, yk[:, 0], "k-", linewidth=0.6, label="measured")
@@ -424,7 +461,52 @@ def _write_bands(model, records, out: Path, dt: float, level: float) -> float:
         ax.figure.savefig(out / f"band_{k}.png", dpi=90)
         plt.close(ax.figure)
     pd.DataFrame(rows).to_csv(out / "band.csv", index=False)
-    return interval_coverage(*(list(b) for b in zip(*bounds, strict=True)))
+    coverage = interval_coverage(*(list(b) for b in zip(*bounds, strict=True)))
+    width = _band_width([b[0] for b in bounds], stds)
+    return coverage, float(np.max(width))
+
+
+def _non_finite(evaluation: Bunch, label: str) -> list[Bunch]:
+    """Where the model's predictions or free run first turned non-finite."""
+    found = []
+    for mode in ("prediction", "simulation"):
+        for field in evaluation.outputs:
+            for j, e in enumerate(evaluation.errors[label, mode, field]):
+                bad = np.flatnonzero(~np.isfinite(e))
+                if bad.size:
+                    found.append(
+                        Bunch(record=j, mode=mode, output=field, sample=int(bad[0]))
+                    )
+    return found
+
+
+def describe_non_finite(entry: Bunch, record: str | None = None) -> str:
+    """A sentence on one entry of :func:`_non_finite`."""
+    what = "one-step predictions" if entry.mode == "prediction" else "free run"
+    where = record or f"record {entry.record}"
+    advice = (
+        "a one-step predictor that diverges on measured outputs has an "
+        "unstable innovation filter (ISSM) or met outputs far outside its "
+        "training range; check the record there"
+        if entry.mode == "prediction"
+        else "the model's free run left the range of its training outputs"
+    )
+    return (
+        f"The {what} of {entry.output!r} on {where} are not finite from sample "
+        f"{entry.sample} (counted from 0) on: {advice}. The scores of this record "
+        "count it as diverged."
+    )
+
+
+def wide_band_warning(width: float) -> str:
+    """What a band wider than the output's spread means for its coverage."""
+    return (
+        f"The band is wide: its standard deviation is on average {width:.2g} "
+        "times the output's, so its coverage says little about the model (a "
+        "band as wide as the output's own spread covers most samples whatever "
+        "the model does); the free run's errors and the bands' inputs (noise "
+        "and weight uncertainty) tell more."
+    )
 
 
 def _check_parquet() -> None:
