@@ -313,3 +313,49 @@ def test_validate_reports_predictions_that_turn_non_finite(records, tmp_path, ca
     # A clean record: no warning.
     assert main([*argv[:3], str(b), *argv[4:], "--out", str(out), "--overwrite"]) == 0
     assert "not finite" not in capsys.readouterr().err
+
+
+def test_validate_starts_free_runs_from_measured_samples(tmp_path, capsys):
+    from scipy.signal import lfilter
+
+    from sysid_nn import load_model
+
+    rng = np.random.default_rng(3)
+    u = rng.standard_normal(1200)
+    y = lfilter([0.0, 0.5], [1.0, -1.8, 0.9], u) + 1e-3 * rng.standard_normal(1200)
+    t = 0.01 * np.arange(600)
+    train, moving = tmp_path / "train.csv", tmp_path / "moving.csv"
+    pd.DataFrame({"t": t, "force": u[:600], "x": y[:600]}).to_csv(train, index=False)
+    # A record that starts in motion: the continuation, cut mid-motion.
+    frame = pd.DataFrame({"t": t[:300], "force": u[900:], "x": y[900:]})
+    frame.to_csv(moving, index=False)
+    model = tmp_path / "model.sysid"
+    argv = ["fit", str(train), "--input", "force", "--output", "x", "--hidden", "0"]
+    argv += ["--output-lags", "2", "--input-lags", "1", "--n-init", "1"]
+    assert main([*argv, "--save", str(model), "--quiet"]) == 0
+    argv = ["validate", "--model", str(model), str(moving), "--max-lag", "10"]
+    runs = {}
+    for extra in ([], ["--y-init", "40"]):
+        out = tmp_path / f"v{len(extra)}"
+        assert main([*argv, *extra, "--out", str(out)]) == 0
+        printed = capsys.readouterr().out
+        results = pd.read_csv(out / "results.csv").set_index("mode")
+        runs[len(extra)] = results.loc["simulation", "nrmse"]
+        report = (out / "report.md").read_text()
+        if extra:
+            assert "free runs from their first 40 measured samples" in printed
+            assert "Free runs start from each record's first 40 measured" in report
+        else:
+            assert "free runs from rest" in printed
+            assert "Free runs start from rest" in report
+    # The measured start, scored after the window, as simulate(y_init=...) is.
+    est = load_model(model)
+    X, y = frame[["force"]].to_numpy(), frame["x"].to_numpy()
+    sim = est.simulate(X, y_init=y[:40])
+    expected = np.sqrt(np.mean((y[40:] - sim[40:]) ** 2)) / np.std(y[40:])
+    np.testing.assert_allclose(runs[2], expected, rtol=1e-10)
+    # From rest the run carries the unknown start's transient; not from the window.
+    assert runs[2] < 0.01 < runs[0]
+    # The window must leave room for the residual tests.
+    assert main([*argv, "--y-init", "290", "--out", str(tmp_path / "v9")]) == 2
+    assert "after the first 290 (--y-init)" in _one_error_line(capsys)

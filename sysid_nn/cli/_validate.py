@@ -63,6 +63,16 @@ def _add_validate(sub: argparse._SubParsersAction) -> None:
         help="largest lag of the residual tests; at most (shortest record - 10) / 2",
     )
     p.add_argument(
+        "--y-init",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="start each record's free run from its first N measured samples "
+        "(the initial conditions whose free run fits them best), for records "
+        "that do not start at rest, and score it after them (default: from the "
+        "model's rest)",
+    )
+    p.add_argument(
         "--band",
         type=_band_level,
         default=None,
@@ -103,22 +113,24 @@ def _load_model(path: Path, trusted: bool = False):
     return bundle
 
 
-def _check_max_lag(max_lag: int, records: _Records) -> None:
+def _check_max_lag(max_lag: int, records: _Records, y_init: int = 0) -> None:
+    """The residual tests' lags fit the shortest record (after ``--y-init``)."""
     from sysid_nn._correlation_tests import max_lag_bound
 
     lengths = records.lengths()
     shortest = min(range(len(lengths)), key=lengths.__getitem__)
-    bound = max_lag_bound(lengths[shortest])
+    bound = max_lag_bound(lengths[shortest] - y_init)
+    after = f" after the first {y_init} (--y-init)" if y_init else ""
     if max_lag > bound:
         fix = (
             f"use --max-lag {bound} or less"
             if bound >= 1
-            else "the residual tests need records of at least 12 samples"
+            else f"the residual tests need records of at least 12 samples{after}"
         )
         raise ValueError(
             f"--max-lag {max_lag} needs records of at least {2 * max_lag + 10} "
-            f"samples, but {records.origins[shortest]} has {lengths[shortest]}; "
-            f"{fix}."
+            f"samples{after}, but {records.origins[shortest]} has "
+            f"{lengths[shortest]}; {fix}."
         )
 
 
@@ -149,7 +161,8 @@ def _run_validate(args: argparse.Namespace) -> int:
             f"was fitted at dt = {bundle.dt:g} s; a model only applies at the "
             "step it was identified at: resample the records."
         )
-    _check_max_lag(args.max_lag, records)
+    y_init = args.y_init or 0
+    _check_max_lag(args.max_lag, records, y_init)
     series = None if args.series == "none" else args.series
     if series == "parquet":
         from sysid_nn.study._run import _check_parquet
@@ -182,6 +195,7 @@ def _run_validate(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         series=series,
         band=args.band,
+        y_init=y_init,
     )
     for entry in result.non_finite:
         record = f"{records.origins[entry.record]}"
@@ -192,15 +206,17 @@ def _run_validate(args: argparse.Namespace) -> int:
         print(f"{_PROG}: warning: {warning}", file=sys.stderr)
     if not args.quiet:
         X, y = model.arrays(records.columns)
-        print(
-            f"{model.label} on {len(X)} experiment(s) at dt = {dt:g} s "
-            "(NRMSE pooled over the experiments):"
+        start = (
+            f"from their first {y_init} measured samples, scored after them"
+            if y_init
+            else "from rest"
         )
         print(
-            "\n".join(
-                _score_lines(_scores(model.estimator, X, y), model.outputs, units)
-            )
+            f"{model.label} on {len(X)} experiment(s) at dt = {dt:g} s, free runs "
+            f"{start} (NRMSE pooled over the experiments):"
         )
+        scores = _scores(model.estimator, X, y, y_init=y_init)
+        print("\n".join(_score_lines(scores, model.outputs, units)))
         written = "results.csv, summary.csv" + (f", series.{series}" if series else "")
         print(f"wrote {result.out_dir}/report.md, {written} and figures")
         if args.band is not None:
