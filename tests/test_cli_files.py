@@ -384,20 +384,23 @@ def test_validate_reports_every_output_with_units(frame, tmp_path, capsys, monke
     )  # records x outputs x modes
 
     # Figures: both outputs on the axes, units once, the input by its name.
+    # The user's figure names, and no paper's notation drawn in them.
     for name in (
-        "fig4_2_prediction.png",
-        "fig4_3_residual_autocorrelation.png",
-        "fig4_4_residual_cross_correlation.png",
-        "fig4_5_prediction_error_statistics.png",
-        "fig4_6_simulation.png",
-        "fig4_7_simulation_error_statistics.png",
+        "prediction.png",
+        "residual_autocorrelation.png",
+        "residual_cross_correlation.png",
+        "prediction_error_statistics.png",
+        "simulation.png",
+        "simulation_error_statistics.png",
     ):
         text = " ".join(drawn[name])
         assert "displacement [m]" in text and "velocity (m/s)" in text, name
         assert "[m] [m]" not in text and "input 0" not in text, name
-    assert "force [kN]" in drawn["fig4_4_residual_cross_correlation.png"]
-    assert "error [m/s]" in drawn["fig4_7_simulation_error_statistics.png"]
-    assert "record 0" in " ".join(drawn["fig4_2_prediction.png"])
+        assert "μ_" not in text and "σ_" not in text and "fig. 4" not in text, name
+    assert "force [kN]" in drawn["residual_cross_correlation.png"]
+    assert "error [m/s]" in drawn["simulation_error_statistics.png"]
+    assert "mean error" in drawn["simulation_error_statistics.png"]
+    assert "record 0" in " ".join(drawn["prediction.png"])
 
 
 def _figure_texts(monkeypatch):
