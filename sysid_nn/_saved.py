@@ -71,6 +71,7 @@ class _Encoder:
     def __init__(self) -> None:
         self.arrays: list[np.ndarray] = []
         self.dataclasses = {cls: name for name, cls in _dataclasses().items()}
+        self.estimators = {cls: name for name, cls in _estimators().items()}
 
     def array(self, value: np.ndarray, where: str) -> int:
         if value.dtype.hasobject:
@@ -98,6 +99,12 @@ class _Encoder:
         if isinstance(value, dict) and all(isinstance(k, str) for k in value):
             tag = "bunch" if isinstance(value, Bunch) else "dict"
             return {"t": tag, "v": self.mapping(value, where)}
+        if type(value) in self.estimators:  # e.g. the ISSM's TDL start, tdl_
+            return {
+                "t": "estimator",
+                "name": self.estimators[type(value)],
+                "v": self.mapping(value.__dict__, where),
+            }
         if type(value) in self.dataclasses:
             fields = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
             return {
@@ -120,22 +127,19 @@ def _write(path: str | os.PathLike, estimator: Any, info: dict) -> None:
 
     from sysid_nn import __version__
 
-    names = {cls: name for name, cls in _estimators().items()}
-    if type(estimator) not in names:
+    if type(estimator) not in _estimators().values():
         raise TypeError(
             "estimator must be a TDLRegressor or an ISSMRegressor, got "
             f"{type(estimator).__name__}."
         )
     check_is_fitted(estimator, "coefs_")
     encode = _Encoder()
-    state = encode.mapping(estimator.__dict__, type(estimator).__name__)
     header = {
         "format": _FORMAT,
         "format_version": _FORMAT_VERSION,
         "sysid_nn_version": __version__,
-        "estimator": names[type(estimator)],
         "info": info,
-        "state": state,
+        "estimator": encode(estimator, type(estimator).__name__),
     }
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
         archive.writestr(_HEADER, json.dumps(header, allow_nan=False, indent=1))
@@ -245,6 +249,7 @@ class _Decoder:
     def __init__(self, archive: zipfile.ZipFile, where: str) -> None:
         self.archive, self.where = archive, where
         self.dataclasses = _dataclasses()
+        self.estimators = _estimators()
 
     def array(self, index: Any) -> np.ndarray:
         try:
@@ -288,6 +293,13 @@ class _Decoder:
                 if not known[k].init:
                     object.__setattr__(obj, k, v)
             return obj
+        if tag == "estimator" and value.get("name") in self.estimators:
+            cls = self.estimators[value["name"]]
+            estimator = cls.__new__(cls)
+            # The attributes as saved; no __setstate__ (the version is
+            # checked once, for the file).
+            estimator.__dict__.update(self.mapping(value.get("v")))
+            return estimator
         raise self.broken(f"unknown type {tag!r}")
 
     def mapping(self, value: Any) -> dict:
@@ -321,15 +333,9 @@ def _read(path: str | os.PathLike) -> tuple[Any, dict, str | None]:
                 f"sysid_nn {header.get('sysid_nn_version')}; this sysid_nn reads "
                 f"versions up to {_FORMAT_VERSION}. Upgrade sysid_nn to load it."
             )
-        classes = _estimators()
-        name = header.get("estimator")
-        if name not in classes:
-            raise decode.broken(f"unknown estimator {name!r}")
-        cls = classes[name]
-        estimator = cls.__new__(cls)
-        # The attributes as saved; no __setstate__ (the version is checked
-        # once, for the file).
-        estimator.__dict__.update(decode.mapping(header.get("state")))
+        estimator = decode(header.get("estimator"))
+        if type(estimator) not in _estimators().values():
+            raise decode.broken("no estimator")
         info = header.get("info") or {}
         if not isinstance(info, dict):
             raise decode.broken("info")

@@ -63,6 +63,26 @@ def test_round_trip_is_bit_identical(fitted_models, tmp_path, kind):
     assert loaded.training_history_ == est.training_history_
 
 
+def test_an_issm_started_from_a_tdl_round_trips(tmp_path):
+    """Its fitted attributes hold the TDL it started from (``tdl_``)."""
+    import warnings
+
+    from sysid_nn import ISSMRegressor, TDLRegressor
+
+    rng = np.random.default_rng(2)
+    X = rng.standard_normal((300, 1))
+    y = np.convolve(np.tanh(X[:, 0]), [0.0, 0.6, 0.3])[:300]
+    est = ISSMRegressor(init="tdl", hidden_layer_sizes=(3,), n_init=1, max_iter=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est.fit(X, y)
+    save_model(est, tmp_path / "m.sysid")
+    loaded = load_model(tmp_path / "m.sysid")
+    assert type(loaded.tdl_) is TDLRegressor
+    np.testing.assert_array_equal(loaded.tdl_.simulate(X), est.tdl_.simulate(X))
+    np.testing.assert_array_equal(loaded.simulate(X), est.simulate(X))
+
+
 def test_the_file_is_data_only(fitted_models, tmp_path):
     est, _, _ = fitted_models["issm", 2]
     path = tmp_path / "model.sysid"
@@ -76,7 +96,8 @@ def test_the_file_is_data_only(fitted_models, tmp_path):
                 np.lib.format.read_array(f, allow_pickle=False)
     assert names[0] == "model.json"
     assert all(n.startswith("arrays/") and n.endswith(".npy") for n in names[1:])
-    assert header["format_version"] == 1 and header["estimator"] == "ISSMRegressor"
+    assert header["format_version"] == 1
+    assert header["estimator"]["name"] == "ISSMRegressor"
     _, info = load_model(path, with_info=True)
     assert info.inputs == ("u1", "u2") and info.outputs == ("y1", "y2")
     assert info.dt == 0.01 and info.files == [] and info.units == {}
@@ -103,13 +124,18 @@ def test_newer_format_and_unknown_types_are_refused(fitted_models, tmp_path):
     save_model(est, path)
     # A type outside the whitelist is refused, not looked up.
     _rewrite_header(
-        path, lambda h: h["state"].update(extra={"t": "dataclass", "name": "Path"})
+        path,
+        lambda h: h["estimator"]["v"].update(extra={"t": "dataclass", "name": "Path"}),
     )
     with pytest.raises(ValueError, match="unknown type 'dataclass'"):
         load_model(path)
     save_model(est, path)
-    _rewrite_header(path, lambda h: h.update(estimator="os.system"))
-    with pytest.raises(ValueError, match=r"unknown estimator 'os\.system'"):
+    _rewrite_header(path, lambda h: h["estimator"].update(name="os.system"))
+    with pytest.raises(ValueError, match="unknown type 'estimator'"):
+        load_model(path)
+    save_model(est, path)
+    _rewrite_header(path, lambda h: h.update(estimator={"t": "bunch", "v": {}}))
+    with pytest.raises(ValueError, match="no estimator"):
         load_model(path)
 
 
