@@ -436,3 +436,43 @@ def test_a_report_on_user_records_speaks_plainly(tmp_path):
         if plain:
             assert "Mean error and error std of simulation errors" in texts[0]
             assert texts[1:] == ["mean error", "error std"]
+
+
+def test_figure_titles_fit_their_figures(tmp_path, monkeypatch):
+    """A long model label and the correlation figures' notes are not clipped."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from sysid_nn import HystereticOscillator, TDLRegressor
+    from sysid_nn.study import StudyModel, run_validation
+
+    rec = HystereticOscillator(r0=0.05).generate(2, n_samples=300, random_state=0)
+    records = {"force": list(rec.excitation), "x": list(rec.displacement)}
+    label = "TDL (" + ", ".join(f"option_{k}={k}" for k in range(12)) + ")"
+    est = TDLRegressor(hidden_layer_sizes=(), n_init=1)
+    model = StudyModel(label, est, ("force",), ("x",))
+    est.fit(*model.arrays(records))
+    overflow = {}
+    savefig = Figure.savefig
+
+    def measuring(fig, fname, *args, **kwargs):
+        result = savefig(fig, fname, *args, **kwargs)
+        renderer = FigureCanvasAgg(fig).get_renderer()
+        fig.draw(renderer)
+        titles = [fig._suptitle] if fig._suptitle else []
+        titles += [ax.title for ax in fig.axes if ax.title.get_text()]
+        box = fig.bbox
+        overflow[str(fname)] = [
+            t.get_text()
+            for t in titles
+            if t.get_window_extent(renderer).x0 < box.x0 - 1
+            or t.get_window_extent(renderer).x1 > box.x1 + 1
+        ]
+        return result
+
+    monkeypatch.setattr(Figure, "savefig", measuring)
+    run_validation(model, records, tmp_path / "v", dt=0.01, max_lag=10, series=None)
+    assert len(overflow) == 6
+    assert all(not clipped for clipped in overflow.values()), {
+        k.rsplit("/", 1)[1]: v for k, v in overflow.items() if v
+    }

@@ -321,6 +321,68 @@ FIGURES = {
 }
 
 
+#: Share of the room a panel's title may take (the constrained layout moves
+#: panels a little after the titles are wrapped).
+_TITLE_SHARE = 0.95
+
+
+def _wrapped(text: str, font, width: float) -> str:
+    """``text`` with its lines broken between words to ``width`` points."""
+    from matplotlib.backends.backend_agg import RendererAgg
+
+    renderer = RendererAgg(1, 1, 72)  # 72 dpi: widths in points
+
+    def fits(line: str) -> bool:
+        w, _, _ = renderer.get_text_width_height_descent(line, font, ismath=False)
+        return w <= width
+
+    out = []
+    for paragraph in text.split("\n"):
+        line = ""
+        for word in paragraph.split(" "):
+            candidate = f"{line} {word}" if line else word
+            if line and not fits(candidate):
+                out.append(line)
+                candidate = word
+            line = candidate
+        out.append(line)
+    return "\n".join(out)
+
+
+def fit_titles(fig) -> None:
+    """Wrap the figure's and its panels' titles, and legend entries, to fit.
+
+    Long titles (a model label with all its options, the correlation
+    figures' explanations) are otherwise clipped at the figure's edges, and
+    a long legend entry squeezes its panel; the constrained layout makes room
+    for the extra lines.
+    """
+
+    def wrap(text, limit: float) -> None:
+        if text.get_text():
+            font = text.get_fontproperties()
+            text.set_text(_wrapped(text.get_text(), font, limit))
+
+    width = fig.get_figwidth() * 72
+    # A legend entry (a model's label) may take half its panel's width;
+    # then the layout places the panels as they will be drawn.
+    for ax in fig.axes:
+        legend = ax.get_legend()
+        for text in legend.get_texts() if legend is not None else []:
+            wrap(text, 0.5 * ax.get_position().width * width)
+    fig.draw_without_rendering()
+    if fig._suptitle is not None:
+        wrap(fig._suptitle, width)
+    for ax in fig.axes:
+        # A title is centred on its panel and may reach over the panel's
+        # margins, not over the figure's edges.
+        box = ax.get_position()
+        centre = (box.x0 + box.x1) / 2
+        room = _TITLE_SHARE * 2 * min(centre, 1 - centre) * width
+        for title in (ax.title, ax._left_title, ax._right_title):
+            wrap(title, room)
+
+
 #: The paper's names of the error statistics and the plain ones of a report
 #: on a user's own records (as in the report's tables).
 _PLAIN_STATISTICS = ("μ_Ns and σ_Ns of", "Mean error and error std of")

@@ -25,6 +25,7 @@ from sysid_nn.study._figures import (
     _figures,
     _label,
     figure_file,
+    fit_titles,
     hysteresis_loops,
     show_long_record,
 )
@@ -116,7 +117,9 @@ def _write_outputs(
     builders = _figures(models, data, evaluation, loops)
     paper = data.get("paper_terms", True)
     for name, build in _progress(builders.items(), len(builders), "figures", progress):
-        build().savefig(tmp / figure_file(name, paper), dpi=90)
+        fig = build()
+        fit_titles(fig)
+        fig.savefig(tmp / figure_file(name, paper), dpi=90)
     return summary, list(builders)
 
 
