@@ -319,7 +319,7 @@ def _read(path: str | os.PathLike) -> tuple[Any, dict, str | None]:
         decode = _Decoder(archive, where)
         try:
             header = json.loads(archive.read(_HEADER))
-        except (KeyError, ValueError):
+        except (KeyError, ValueError, RecursionError):
             raise ValueError(
                 f"{where} is a zip archive but not a model file (no readable "
                 f"{_HEADER})."
@@ -333,13 +333,40 @@ def _read(path: str | os.PathLike) -> tuple[Any, dict, str | None]:
                 f"sysid_nn {header.get('sysid_nn_version')}; this sysid_nn reads "
                 f"versions up to {_FORMAT_VERSION}. Upgrade sysid_nn to load it."
             )
-        estimator = decode(header.get("estimator"))
+        try:
+            estimator = decode(header.get("estimator"))
+        except RecursionError:
+            raise decode.broken("nested too deeply") from None
         if type(estimator) not in _estimators().values():
             raise decode.broken("no estimator")
         info = header.get("info") or {}
-        if not isinstance(info, dict):
+        if not (isinstance(info, dict) and _valid_info(info)):
             raise decode.broken("info")
-        return estimator, info, header.get("sysid_nn_version")
+        version = header.get("sysid_nn_version")
+        return estimator, info, version if isinstance(version, str) else None
+
+
+def _valid_info(info: dict) -> bool:
+    """Whether ``info`` holds what :func:`save_model` writes, of its types."""
+
+    def names(value) -> bool:
+        return value is None or (
+            isinstance(value, list) and all(isinstance(v, str) for v in value)
+        )
+
+    units = info.get("units") or {}
+    dt = info.get("dt")
+    return (
+        names(info.get("inputs"))
+        and names(info.get("outputs"))
+        and names(info.get("files"))
+        and (dt is None or (isinstance(dt, (int, float)) and 0 < dt < math.inf))
+        and isinstance(units, dict)
+        and all(isinstance(v, str) for v in units.values())
+        and all(
+            isinstance(info.get(k), (str, type(None))) for k in ("split_by", "label")
+        )
+    )
 
 
 def _kind(path: str | os.PathLike) -> str:

@@ -137,6 +137,10 @@ def test_newer_format_and_unknown_types_are_refused(fitted_models, tmp_path):
     _rewrite_header(path, lambda h: h.update(estimator={"t": "bunch", "v": {}}))
     with pytest.raises(ValueError, match="no estimator"):
         load_model(path)
+    save_model(est, path)
+    _rewrite_header(path, lambda h: h["info"].update(inputs=[1, 2]))
+    with pytest.raises(ValueError, match=r"damaged or not a model file \(info\)"):
+        load_model(path)
 
 
 def test_save_model_checks_its_arguments(fitted_models, tmp_path):
