@@ -255,3 +255,36 @@ def test_a_model_of_another_version_warns_on_load(fitted_models, tmp_path):
     with pytest.warns(InconsistentVersionWarning, match="model.sysid was saved"):
         _, info = load_model(path, with_info=True)
     assert info.sysid_nn_version == "0.0.1"
+
+
+def test_validate_reads_an_old_model_file_only_when_trusted(
+    fitted_models, tmp_path, capsys
+):
+    import pandas as pd
+    from sklearn.utils import Bunch
+
+    from sysid_nn.study import StudyModel
+
+    est, X, y = fitted_models["linear", 1]
+    old = tmp_path / "model.joblib"
+    bundle = Bunch(
+        model=StudyModel("TDL", est, ("u1", "u2"), ("y",)),
+        dt=0.01,
+        units={},
+        files=["train.csv"],
+        split_by=None,
+        sysid_nn_version="0.1.0.dev0",
+    )
+    joblib.dump(bundle, old)
+    data = tmp_path / "data.csv"
+    frame = pd.DataFrame({"u1": X[:, 0], "u2": X[:, 1], "y": y})
+    frame.to_csv(data, index=False)
+    argv = ["validate", "--model", str(old), str(data), "--dt", "0.01"]
+    argv += ["--max-lag", "10", "--quiet", "--out"]
+    assert main([*argv, str(tmp_path / "refused")]) == 1
+    assert "--trust-pickle" in capsys.readouterr().err
+    assert main([*argv, str(tmp_path / "v"), "--trust-pickle"]) == 0
+    err = capsys.readouterr().err
+    assert "sysid-nn: warning:" in err and "is a pickle; loading it ran" in err
+    results = pd.read_csv(tmp_path / "v" / "results.csv")
+    assert set(results["mode"]) == {"prediction", "simulation"}
