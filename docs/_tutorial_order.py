@@ -19,6 +19,7 @@ ORDER = [
     "plot_monte_carlo.py",
     "plot_confidence_bands.py",
     "plot_csv_data.py",
+    "plot_onnx_export.py",
     "plot_benchmark_in_ten_lines.py",
     "plot_dask.py",
 ]

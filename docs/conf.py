@@ -175,6 +175,7 @@ intersphinx_timeout = 10
 _TOP_LEVEL_GROUPS = {
     "Estimators": ["TDLRegressor", "ISSMRegressor"],
     "Data generation": ["HystereticOscillator", "ShearBuilding"],
+    "Saving and export": ["save_model", "load_model", "export_onnx", "to_dlti"],
     "Warnings": ["DivergenceWarning"],
 }
 _API_PAGES = [

@@ -111,15 +111,16 @@ plt.show()
 # The same from the command line
 # ------------------------------
 # ``sysid-nn fit`` reads named columns of CSV (or parquet) files, one
-# experiment per file, fits a TDL or ISSM network and saves it with joblib;
+# experiment per file, fits a TDL or ISSM network and saves it to a model
+# file (data only: loading it runs no code);
 # ``sysid-nn validate`` runs a saved model on other files and writes the
 # residual tests, the error statistics of eq. 19-20, figures and a report:
 #
 # .. code-block:: bash
 #
 #    sysid-nn fit test_01.csv test_02.csv test_03.csv \
-#        --input force --output displacement_mm --dt 0.01 --save model.joblib
-#    sysid-nn validate --model model.joblib test_04.csv --out validation
+#        --input force --output displacement_mm --dt 0.01 --save model.sysid
+#    sysid-nn validate --model model.sysid test_04.csv --out validation
 #
 # A single file holding several experiments, such as the tidy table of
 # ``sysid-nn generate``, is split into experiments with
@@ -129,7 +130,7 @@ plt.show()
 # ``X_val`` did above. Here the commands run from Python through the same
 # entry point, with a short budget:
 files = [str(folder / f"test_{j:02d}.csv") for j in (1, 2, 3)]
-saved = str(folder / "model.joblib")
+saved = str(folder / "model.sysid")
 status = sysid_nn_command(
     [
         "fit",

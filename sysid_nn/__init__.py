@@ -34,6 +34,9 @@ _LAZY = {
     "InconsistentVersionWarning": "sysid_nn._exceptions",
     "UnstablePredictorWarning": "sysid_nn._estimators._issm",
     "load_model": "sysid_nn._saved",
+    "save_model": "sysid_nn._saved",
+    "export_onnx": "sysid_nn._export",
+    "to_dlti": "sysid_nn._export",
 }
 
 __all__ = [
@@ -44,7 +47,10 @@ __all__ = [
     "ShearBuilding",
     "TDLRegressor",
     "UnstablePredictorWarning",
+    "export_onnx",
     "load_model",
+    "save_model",
+    "to_dlti",
 ]
 
 

@@ -270,6 +270,7 @@ def analyze_residuals(
     skip: int = 0,
     include_zero_lag: bool = True,
     nonlinear: bool = True,
+    y_init: int = 0,
 ) -> ResidualAnalysis:
     """Run a fitted model on data and test its residuals (figs 4.3-4.4).
 
@@ -313,6 +314,12 @@ def analyze_residuals(
         Also run :func:`nonlinear_correlation_tests`. Its ``phi_ee`` and
         ``phi_ue`` duplicate the whiteness and cross-correlation tests, so
         only ``phi_u2e``, ``phi_u2e2`` and ``phi_eeu`` enter the summary.
+    y_init : int, default=0
+        Simulation mode only: start each sequence's free run from its first
+        ``y_init`` measured outputs, ``estimator.simulate(X, y_init=y[:y_init])``
+        (the initial conditions fitted to them), instead of the estimator's
+        default start; those samples are left out of the tests, as with
+        ``skip``.
 
     Returns
     -------
@@ -339,8 +346,18 @@ def analyze_residuals(
     """
     if mode not in ("prediction", "simulation"):
         raise ValueError(f"mode must be 'prediction' or 'simulation'; got {mode!r}.")
-    if isinstance(skip, bool) or not isinstance(skip, (int, np.integer)) or skip < 0:
-        raise ValueError(f"skip must be an integer >= 0; got {skip!r}.")
+    for name, value in (("skip", skip), ("y_init", y_init)):
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, (int, np.integer))
+            or value < 0
+        ):
+            raise ValueError(f"{name} must be an integer >= 0; got {value!r}.")
+    if y_init and mode != "simulation":
+        raise ValueError(
+            f"y_init starts a free run; it applies to mode='simulation', not "
+            f"{mode!r}. Leave it out (0) for predictions."
+        )
     X_seqs, is_list = as_sequence_list(X, "X")
     y_seqs, y_is_list = as_sequence_list(y, "y")
     if is_list != y_is_list:
@@ -349,6 +366,7 @@ def analyze_residuals(
             f"{type(X).__name__} and {type(y).__name__}."
         )
     check_paired(X_seqs, y_seqs, "X", "y")
+    skip = max(skip, y_init)
     shortest = min(v.shape[0] for v in y_seqs)
     if skip >= shortest:
         raise ValueError(
@@ -359,6 +377,9 @@ def analyze_residuals(
     check_max_lag(max_lag, shortest - skip)
     if mode == "prediction":
         model = estimator.predict(X, y, horizon=horizon)
+    elif y_init:
+        window = [v[:y_init] for v in y] if is_list else y[:y_init]
+        model = estimator.simulate(X, y_init=window)
     else:
         model = estimator.simulate(X)
     if is_sequence_list(model) != is_list:

@@ -1,10 +1,10 @@
 """Tests of the ``sysid-nn reproduce``, ``fit`` and ``validate`` commands."""
 
-import joblib
 import numpy as np
 import pandas as pd
 import pytest
 
+from sysid_nn._saved import _read_bundle
 from sysid_nn.cli import main
 from sysid_nn.study import FIGURES
 
@@ -135,19 +135,22 @@ TINY_FIT = ["--n-init", "1", "--max-iter", "5", "--dt", "0.01"]
 
 def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     (a, b), many = records
-    model = tmp_path / "model.joblib"
+    model = tmp_path / "model.sysid"
     argv = ["fit", str(a), str(b), "--input", "force", "--output", "displacement"]
     argv += ["--hidden", "3", "--output-lags", "2", "--input-lags", "2", *TINY_FIT]
     assert main([*argv, "--save", str(model)]) == 0
     assert "fitted TDL" in capsys.readouterr().out
-    bundle = joblib.load(model)
+    bundle = _read_bundle(model)
     assert bundle.model.inputs == ("force",) and bundle.dt == 0.01
     assert bundle.model.estimator.get_params()["hidden_layer_sizes"] == (3,)
 
     out = tmp_path / "validation"
     argv = ["validate", "--model", str(model), str(many), "--split-by", "realization"]
     assert main([*argv, "--out", str(out), "--max-lag", "10", "--quiet"]) == 0
-    expected = {*list(FIGURES)[1:7], "results.csv", "summary.csv", "report.md"}
+    # The user's own figure names, not the paper's fig4_x numbering.
+    figures = [name.split("_", 2)[2] for name in list(FIGURES)[1:7]]
+    assert figures[0] == "prediction.png"
+    expected = {*figures, "results.csv", "summary.csv", "report.md"}
     assert {p.name for p in out.iterdir()} == expected | {"series.csv"}
     results = pd.read_csv(out / "results.csv")
     assert sorted(set(results["record"])) == [0, 1]
@@ -174,6 +177,9 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     own = report.replace("split by 'realization'", "")  # the user's column
     for paper in ("section 4.", "eq. 19", "N_s", "realisation", "realization"):
         assert paper not in own, paper
+    for paper in ("μ_", "σ_", "fig4_", "fig. 4", "figs 4"):
+        assert paper not in own, paper
+    assert "![Mean error and error std of prediction errors](" in report
     assert "The model's one-step residuals" in report
     assert "Some models'" not in report
     # Loading the saved model in Python is one public call.
@@ -187,27 +193,27 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
 
 def test_fit_with_validation_files(records, tmp_path, capsys):
     (a, b), _ = records
-    model = tmp_path / "model.joblib"
+    model = tmp_path / "model.sysid"
     argv = ["fit", str(a), "--val", str(b), "--input", "force"]
     argv += ["--output", "displacement", "--hidden", "3", *TINY_FIT]
     assert main([*argv, "--save", str(model)]) == 0
     assert "on 1 experiment(s)" in capsys.readouterr().out
-    estimator = joblib.load(model).model.estimator
+    estimator = _read_bundle(model).model.estimator
     # The validation file selected the weights.
     assert estimator.best_validation_score_ is not None
     missing = ["fit", str(a), "--val", str(tmp_path / "none.csv"), "--input", "force"]
-    missing += ["--output", "displacement", "--save", str(tmp_path / "other.joblib")]
+    missing += ["--output", "displacement", "--save", str(tmp_path / "other.sysid")]
     assert main(missing) == 1
     assert "none.csv" in _one_error_line(capsys)
 
 
 def test_fit_issm_two_outputs(records, tmp_path, capsys):
     (a, _), _ = records
-    model = tmp_path / "issm.joblib"
+    model = tmp_path / "issm.sysid"
     argv = ["fit", str(a), "--input", "force", "--output", "displacement"]
     argv += ["--output", "velocity", "--model", "issm", "--n-states", "3", *TINY_FIT]
     assert main([*argv, "--save", str(model)]) == 0
-    est = joblib.load(model).model.estimator
+    est = _read_bundle(model).model.estimator
     assert est.n_outputs_ == 2 and est.n_states_ == 3
     capsys.readouterr()
 
@@ -271,10 +277,85 @@ def test_missing_files_exit_1_with_one_line(records, tmp_path, capsys):
     argv = ["fit", str(tmp_path / "none.csv"), "--input", "force", "--output", "x"]
     assert main([*argv, "--save", str(tmp_path / "m")]) == 1
     assert "cannot read" in _one_error_line(capsys)
-    junk = tmp_path / "junk.joblib"
+    junk = tmp_path / "junk.sysid"
     junk.write_text("not a model")
     (a, _), _ = records
     argv = ["validate", "--model", str(junk), str(a), "--out", str(tmp_path / "v")]
     assert main(argv) == 1
-    assert "cannot read" in _one_error_line(capsys)
+    assert "is not a model file" in _one_error_line(capsys)
     assert not (tmp_path / "v").exists()
+
+
+def test_validate_reports_predictions_that_turn_non_finite(records, tmp_path, capsys):
+    (a, b), _ = records
+    model = tmp_path / "model.sysid"
+    argv = ["fit", str(a), "--input", "force", "--output", "displacement"]
+    argv += ["--hidden", "0", "--output-lags", "2", "--input-lags", "2", *TINY_FIT]
+    assert main([*argv, "--save", str(model), "--quiet"]) == 0
+    # A glitch in the measured output at sample 231: the one-step predictor,
+    # fed the measurement, leaves the range from the next sample on.
+    glitch = tmp_path / "glitch.csv"
+    frame = pd.read_csv(b)
+    frame.loc[231, "displacement"] = 1e12
+    frame.to_csv(glitch, index=False)
+    out = tmp_path / "validation"
+    argv = ["validate", "--model", str(model), str(glitch), "--max-lag", "10"]
+    assert main([*argv, "--out", str(out), "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert (
+        "warning: The one-step predictions of 'displacement' on "
+        f"{glitch} are not finite from sample 232" in err
+    )
+    assert "free run" not in err  # the free run does not read the outputs
+    report = (out / "report.md").read_text()
+    assert "## Warnings" in report
+    assert "on record 0 are not finite from sample 232" in report
+    # A clean record: no warning.
+    assert main([*argv[:3], str(b), *argv[4:], "--out", str(out), "--overwrite"]) == 0
+    assert "not finite" not in capsys.readouterr().err
+
+
+def test_validate_starts_free_runs_from_measured_samples(tmp_path, capsys):
+    from scipy.signal import lfilter
+
+    from sysid_nn import load_model
+
+    rng = np.random.default_rng(3)
+    u = rng.standard_normal(1200)
+    y = lfilter([0.0, 0.5], [1.0, -1.8, 0.9], u) + 1e-3 * rng.standard_normal(1200)
+    t = 0.01 * np.arange(600)
+    train, moving = tmp_path / "train.csv", tmp_path / "moving.csv"
+    pd.DataFrame({"t": t, "force": u[:600], "x": y[:600]}).to_csv(train, index=False)
+    # A record that starts in motion: the continuation, cut mid-motion.
+    frame = pd.DataFrame({"t": t[:300], "force": u[900:], "x": y[900:]})
+    frame.to_csv(moving, index=False)
+    model = tmp_path / "model.sysid"
+    argv = ["fit", str(train), "--input", "force", "--output", "x", "--hidden", "0"]
+    argv += ["--output-lags", "2", "--input-lags", "1", "--n-init", "1"]
+    assert main([*argv, "--save", str(model), "--quiet"]) == 0
+    argv = ["validate", "--model", str(model), str(moving), "--max-lag", "10"]
+    runs = {}
+    for extra in ([], ["--y-init", "40"]):
+        out = tmp_path / f"v{len(extra)}"
+        assert main([*argv, *extra, "--out", str(out)]) == 0
+        printed = capsys.readouterr().out
+        results = pd.read_csv(out / "results.csv").set_index("mode")
+        runs[len(extra)] = results.loc["simulation", "nrmse"]
+        report = (out / "report.md").read_text()
+        if extra:
+            assert "free runs from their first 40 measured samples" in printed
+            assert "Free runs start from each record's first 40 measured" in report
+        else:
+            assert "free runs from rest" in printed
+            assert "Free runs start from rest" in report
+    # The measured start, scored after the window, as simulate(y_init=...) is.
+    est = load_model(model)
+    X, y = frame[["force"]].to_numpy(), frame["x"].to_numpy()
+    sim = est.simulate(X, y_init=y[:40])
+    expected = np.sqrt(np.mean((y[40:] - sim[40:]) ** 2)) / np.std(y[40:])
+    np.testing.assert_allclose(runs[2], expected, rtol=1e-10)
+    # From rest the run carries the unknown start's transient; not from the window.
+    assert runs[2] < 0.01 < runs[0]
+    # The window must leave room for the residual tests.
+    assert main([*argv, "--y-init", "290", "--out", str(tmp_path / "v9")]) == 2
+    assert "after the first 290 (--y-init)" in _one_error_line(capsys)

@@ -5,12 +5,12 @@ import argparse
 import io
 from pathlib import Path
 
-import joblib
 import numpy as np
 import pandas as pd
 import pytest
 
 from sysid_nn import HystereticOscillator
+from sysid_nn._saved import _read_bundle
 from sysid_nn.cli import build_parser, main
 
 TINY = ["--n-init", "1", "--max-iter", "3", "--hidden", "2"]
@@ -61,7 +61,7 @@ def test_fit_never_saves_over_its_own_data(files, tmp_path, capsys):
             assert _fit(files[:2], save, *extra) == 1
             line = _error(capsys)
             assert "would overwrite the input file" in line and data.name in line
-    assert _fit(files[:1], tmp_path / "m.joblib", "--val", str(files[1])) == 0
+    assert _fit(files[:1], tmp_path / "m.sysid", "--val", str(files[1])) == 0
     capsys.readouterr()
     assert _fit(files[:1], files[1], "--val", str(files[1]), "--overwrite") == 1
     assert "would overwrite the input file" in _error(capsys)
@@ -69,15 +69,23 @@ def test_fit_never_saves_over_its_own_data(files, tmp_path, capsys):
 
 
 def test_fit_save_needs_overwrite(files, tmp_path, capsys):
-    save = tmp_path / "model.joblib"
+    save = tmp_path / "model.sysid"
     save.write_text("precious")
     assert _fit(files[:2], save) == 1
     line = _error(capsys)
     assert str(save) in line and "--overwrite" in line
     assert save.read_text() == "precious"
-    assert _fit(files[:2], save, "--overwrite", "--quiet") == 0
-    assert joblib.load(save).model.inputs == ("force",)
-    assert [p.name for p in tmp_path.glob(".model.joblib*")] == []
+    # --overwrite replaces a model file only, never data or anything else.
+    assert _fit(files[:2], save, "--overwrite", "--quiet") == 1
+    line = _error(capsys)
+    assert "is not a model file" in line and "another --save" in line
+    assert save.read_text() == "precious"
+    model = tmp_path / "m.sysid"
+    assert _fit(files[:2], model, "--quiet") == 0
+    assert _fit(files[:2], model, "--overwrite", "--quiet", "--seed", "1") == 0
+    assert _read_bundle(model).model.estimator.random_state == 1
+    assert _read_bundle(model).model.inputs == ("force",)
+    assert [p.name for p in tmp_path.glob(".m.sysid*")] == []
 
 
 def test_generate_needs_overwrite_and_writes_atomically(tmp_path, capsys, monkeypatch):
@@ -107,7 +115,7 @@ def test_generate_needs_overwrite_and_writes_atomically(tmp_path, capsys, monkey
 def test_unwritable_save_is_refused_before_fitting(files, tmp_path, capsys):
     blocker = tmp_path / "a_file"
     blocker.write_text("x")
-    for save in (tmp_path / "no_such_dir" / "m.joblib", blocker / "m.joblib"):
+    for save in (tmp_path / "no_such_dir" / "m.sysid", blocker / "m.sysid"):
         assert _fit(files[:2], save) == 1
         # One line: the error, and no training progress before it.
         line = _error(capsys)
@@ -115,7 +123,7 @@ def test_unwritable_save_is_refused_before_fitting(files, tmp_path, capsys):
 
 
 def test_validate_out_never_replaces_inputs_or_foreign_folders(files, tmp_path, capsys):
-    model = tmp_path / "m.joblib"
+    model = tmp_path / "m.sysid"
     assert _fit(files[:2], model, "--quiet") == 0
     capsys.readouterr()  # the short fit's convergence warning
     argv = ["validate", "--model", str(model), str(files[2]), "--max-lag", "5"]
@@ -141,31 +149,31 @@ def test_validate_out_never_replaces_inputs_or_foreign_folders(files, tmp_path, 
 
 # ----------------------------------------------------------- sample times
 def test_dt_is_inferred_from_the_time_column(files, tmp_path, capsys):
-    save = tmp_path / "m.joblib"
+    save = tmp_path / "m.sysid"
     assert _fit(files[:2], save) == 0
     assert "dt = 0.02 s" in capsys.readouterr().out
-    assert joblib.load(save).dt == pytest.approx(0.02)
+    assert _read_bundle(save).dt == pytest.approx(0.02)
     # --dt that disagrees with the file is an error, not a silent choice.
-    assert _fit(files[:2], tmp_path / "m2.joblib", "--dt", "0.01") == 1
+    assert _fit(files[:2], tmp_path / "m2.sysid", "--dt", "0.01") == 1
     line = _error(capsys)
     assert "--dt 0.01" in line and "'t'" in line and "0.02" in line
-    assert _fit(files[:2], tmp_path / "m3.joblib", "--dt", "0.02", "--quiet") == 0
+    assert _fit(files[:2], tmp_path / "m3.sysid", "--dt", "0.02", "--quiet") == 0
 
 
 def test_no_time_column_needs_dt(files, tmp_path, capsys):
     bare = tmp_path / "bare.csv"
     pd.read_csv(files[0]).drop(columns="t").to_csv(bare, index=False)
-    assert _fit([bare], tmp_path / "m.joblib") == 2
+    assert _fit([bare], tmp_path / "m.sysid") == 2
     line = _error(capsys)
     assert "bare.csv" in line and "--dt" in line
-    assert _fit([bare], tmp_path / "m.joblib", "--dt", "0.02", "--quiet") == 0
+    assert _fit([bare], tmp_path / "m.sysid", "--dt", "0.02", "--quiet") == 0
 
 
 def test_non_uniform_times_are_an_error(files, tmp_path, capsys):
     gappy = tmp_path / "gappy.csv"
     frame = pd.read_csv(files[0])
     frame.drop(index=[100, 101]).to_csv(gappy, index=False)
-    assert _fit([gappy], tmp_path / "m.joblib") == 1
+    assert _fit([gappy], tmp_path / "m.sysid") == 1
     line = _error(capsys)
     assert "gappy.csv" in line and "'t'" in line and "not uniform" in line
 
@@ -174,11 +182,11 @@ def test_forgotten_split_by_is_detected(frame, tmp_path, capsys):
     table = tmp_path / "records.csv"
     frame.to_csv(table, index=False)
     argv = ["fit", str(table), "--input", "force", "--output", "displacement"]
-    assert main([*argv, *TINY, "--save", str(tmp_path / "m.joblib")]) == 1
+    assert main([*argv, *TINY, "--save", str(tmp_path / "m.sysid")]) == 1
     line = _error(capsys)
     assert "restarts" in line and "--split-by realization" in line
     argv += ["--split-by", "realization", "--quiet"]
-    assert main([*argv, *TINY, "--save", str(tmp_path / "m.joblib")]) == 0
+    assert main([*argv, *TINY, "--save", str(tmp_path / "m.sysid")]) == 0
 
 
 # ------------------------------------------------------ the user's own files
@@ -186,9 +194,9 @@ def test_semicolons_and_decimal_commas_are_read(files, tmp_path, capsys):
     lab = tmp_path / "lab.csv"
     pd.read_csv(files[0]).to_csv(lab, index=False, sep=";", decimal=",")
     assert "0,02;" in lab.read_text().splitlines()[2]  # a lab export, really
-    save = tmp_path / "m.joblib"
+    save = tmp_path / "m.sysid"
     assert _fit([lab], save, "--quiet") == 0  # sniffed
-    assert joblib.load(save).dt == pytest.approx(0.02)
+    assert _read_bundle(save).dt == pytest.approx(0.02)
     argv = ["--quiet", "--overwrite", "--sep", ";", "--decimal", ","]
     assert _fit([lab], save, *argv) == 0
     capsys.readouterr()
@@ -204,7 +212,7 @@ def test_datetime_time_column_suggests_dt(files, tmp_path, capsys):
     start = pd.Timestamp("2026-01-01 10:00:00")
     frame["t"] = start + pd.to_timedelta(frame["t"], unit="s")
     frame.to_csv(stamped, index=False)
-    assert _fit([stamped], tmp_path / "m.joblib") == 1
+    assert _fit([stamped], tmp_path / "m.sysid") == 1
     line = _error(capsys)
     assert "dates and times" in line and "--time-column none --dt 0.02" in line
 
@@ -212,7 +220,7 @@ def test_datetime_time_column_suggests_dt(files, tmp_path, capsys):
 def test_descending_time_column_is_not_taken_for_experiments(files, tmp_path, capsys):
     backwards = tmp_path / "backwards.csv"
     pd.read_csv(files[0]).iloc[::-1].to_csv(backwards, index=False)
-    assert _fit([backwards], tmp_path / "m.joblib") == 1
+    assert _fit([backwards], tmp_path / "m.sysid") == 1
     line = _error(capsys)
     assert "runs backwards" in line and "sort the file by time" in line
     assert "--split-by" not in line
@@ -224,7 +232,7 @@ def test_duplicated_header_names_are_rejected(files, tmp_path, capsys):
     frame.insert(2, "force2", frame["force"])
     text = frame.to_csv(index=False).replace("force2", "force", 1)
     twice.write_text(text)
-    assert _fit([twice], tmp_path / "m.joblib") == 1
+    assert _fit([twice], tmp_path / "m.sysid") == 1
     line = _error(capsys)
     assert "twice.csv" in line and "'force' more than once" in line
 
@@ -234,10 +242,33 @@ def test_an_input_that_never_changes_is_rejected(files, tmp_path, capsys):
     for k, path in enumerate(files[:2]):
         paths.append(tmp_path / f"zero{k}.csv")
         pd.read_csv(path).assign(force=0.0).to_csv(paths[-1], index=False)
-    assert _fit(paths, tmp_path / "m.joblib") == 1
+    assert _fit(paths, tmp_path / "m.sysid") == 1
     line = _error(capsys)
     assert "input column 'force' holds the single value 0" in line
-    assert not (tmp_path / "m.joblib").exists()
+    assert not (tmp_path / "m.sysid").exists()
+
+
+def test_an_output_that_never_changes_is_rejected(files, tmp_path, capsys):
+    flat = tmp_path / "flat.csv"
+    pd.read_csv(files[0]).assign(displacement=1.5).to_csv(flat, index=False)
+    assert _fit([flat], tmp_path / "m.sysid") == 1
+    line = _error(capsys)
+    assert "output column 'displacement' holds the single value 1.5" in line
+    assert "--output" in line and not (tmp_path / "m.sysid").exists()
+
+
+def test_records_too_short_for_the_model_are_rejected(files, tmp_path, capsys):
+    short = tmp_path / "short.csv"
+    pd.read_csv(files[0]).head(10).to_csv(short, index=False)
+    # 10 rows, 2 output and 2 input lags, 2 hidden units: 8 modelled samples
+    # for 17 weights (found once the fit has resolved the structure).
+    assert _fit([short], tmp_path / "m.sysid", "--quiet") == 1
+    line = _error(capsys)
+    assert "too short for the model: 8 modelled output sample(s)" in line
+    assert "for 17 weights" in line and not (tmp_path / "m.sysid").exists()
+    # The linear model with one lag of each (3 weights) fits them.
+    linear = ["--hidden", "0", "--output-lags", "1", "--input-lags", "1"]
+    assert _fit([short], tmp_path / "m.sysid", *linear, "--quiet") == 0
 
 
 def test_help_shows_every_default(capsys):
@@ -296,7 +327,7 @@ def test_file_content_errors_exit_1_naming_file_and_column(
 ):
     bad = tmp_path / "bad.csv"
     change(pd.read_csv(files[0])).to_csv(bad, index=False)
-    assert _fit([bad], tmp_path / "m.joblib") == 1
+    assert _fit([bad], tmp_path / "m.sysid") == 1
     line = _error(capsys)
     assert "bad.csv" in line and fragment in line
 
@@ -308,12 +339,12 @@ def test_validate_reports_every_output_with_units(frame, tmp_path, capsys, monke
     )
     table = tmp_path / "records.csv"
     named.to_csv(table, index=False)
-    model = tmp_path / "m.joblib"
+    model = tmp_path / "m.sysid"
     argv = ["fit", str(table), "--split-by", "realization", "--input", "force"]
     argv += ["--output", "displacement [m]", "--output", "velocity (m/s)"]
     argv += ["--model", "issm", "--n-init", "1", "--max-iter", "3"]
-    assert main([*argv, "--units", "force=kN", "--save", str(model), "--quiet"]) == 0
-    assert joblib.load(model).units == {
+    assert main([*argv, "--units", "force=kN", "--save", str(model)]) == 0
+    assert _read_bundle(model).units == {
         "force": "kN",
         "displacement [m]": "m",
         "velocity (m/s)": "m/s",
@@ -353,20 +384,23 @@ def test_validate_reports_every_output_with_units(frame, tmp_path, capsys, monke
     )  # records x outputs x modes
 
     # Figures: both outputs on the axes, units once, the input by its name.
+    # The user's figure names, and no paper's notation drawn in them.
     for name in (
-        "fig4_2_prediction.png",
-        "fig4_3_residual_autocorrelation.png",
-        "fig4_4_residual_cross_correlation.png",
-        "fig4_5_prediction_error_statistics.png",
-        "fig4_6_simulation.png",
-        "fig4_7_simulation_error_statistics.png",
+        "prediction.png",
+        "residual_autocorrelation.png",
+        "residual_cross_correlation.png",
+        "prediction_error_statistics.png",
+        "simulation.png",
+        "simulation_error_statistics.png",
     ):
         text = " ".join(drawn[name])
         assert "displacement [m]" in text and "velocity (m/s)" in text, name
         assert "[m] [m]" not in text and "input 0" not in text, name
-    assert "force [kN]" in drawn["fig4_4_residual_cross_correlation.png"]
-    assert "error [m/s]" in drawn["fig4_7_simulation_error_statistics.png"]
-    assert "record 0" in " ".join(drawn["fig4_2_prediction.png"])
+        assert "μ_" not in text and "σ_" not in text and "fig. 4" not in text, name
+    assert "force [kN]" in drawn["residual_cross_correlation.png"]
+    assert "error [m/s]" in drawn["simulation_error_statistics.png"]
+    assert "mean error" in drawn["simulation_error_statistics.png"]
+    assert "record 0" in " ".join(drawn["prediction.png"])
 
 
 def _figure_texts(monkeypatch):
@@ -395,7 +429,7 @@ def test_validate_max_lag_is_checked_against_the_records(tmp_path, capsys):
     )
     table = tmp_path / "long.csv"
     rec.frame.to_csv(table, index=False)
-    model = tmp_path / "m.joblib"
+    model = tmp_path / "m.sysid"
     argv = ["fit", str(table), "--split-by", "realization", "--input", "excitation"]
     argv += ["--output", "displacement", *TINY, "--quiet"]
     assert main([*argv, "--save", str(model)]) == 0
@@ -414,7 +448,7 @@ def test_validate_max_lag_is_checked_against_the_records(tmp_path, capsys):
 # --------------------------------------------------------------- progress
 def test_fit_progress_lines_and_closing_line(files, tmp_path, capsys):
     argv = ["--n-init", "2", "--focus", "simulation"]
-    assert _fit(files, tmp_path / "m.joblib", *argv) == 0
+    assert _fit(files, tmp_path / "m.sysid", *argv) == 0
     captured = capsys.readouterr()
     stages = [line for line in captured.err.splitlines() if "restart" in line]
     assert any("restart 1/2 stage 1/" in line for line in stages)
@@ -429,12 +463,15 @@ def test_fit_progress_lines_and_closing_line(files, tmp_path, capsys):
     assert "held-out" not in captured.out and "optimistic" in closing[0]
     assert "exp2.csv" in closing[0] and "R^2" not in captured.out
     assert closing[1].strip().startswith("displacement: prediction NRMSE")
-    assert _fit(files, tmp_path / "q.joblib", "--quiet") == 0
-    assert "restart" not in capsys.readouterr().err
+    assert _fit(files, tmp_path / "q.sysid", "--quiet") == 0
+    # Quiet: no progress, no summary; only warnings are left, one line each.
+    quiet = capsys.readouterr()
+    assert quiet.out == ""
+    assert all(line.startswith("sysid-nn: warning:") for line in quiet.err.splitlines())
 
 
 def test_fit_single_record_scores_its_held_out_tail(files, tmp_path, capsys):
-    assert _fit(files[:1], tmp_path / "m.joblib") == 0
+    assert _fit(files[:1], tmp_path / "m.sysid") == 0
     out = capsys.readouterr().out
     assert "trained on 1 experiment(s), weights chosen by early stopping on " in out
     assert "on the last 20% of" in out and "held-out" not in out
@@ -442,7 +479,7 @@ def test_fit_single_record_scores_its_held_out_tail(files, tmp_path, capsys):
 
 def test_progress_survives_parallel_restarts(files, tmp_path, capsys):
     argv = ["--n-init", "2", "--n-jobs", "2", "--verbose"]
-    assert _fit(files, tmp_path / "m.joblib", *argv) == 0
+    assert _fit(files, tmp_path / "m.sysid", *argv) == 0
     assert "early stopping on 1 experiment(s)" in capsys.readouterr().out
 
 
@@ -519,7 +556,7 @@ def test_study_progress_is_plain_lines_off_a_terminal(monkeypatch):
 
 def test_fit_writes_nothing_to_stdout_but_results(files, tmp_path, capsys):
     # Progress is on stderr so that the closing line can be piped.
-    assert _fit(files[:2], tmp_path / "m.joblib", "--verbose") == 0
+    assert _fit(files[:2], tmp_path / "m.sysid", "--verbose") == 0
     out = capsys.readouterr().out
     assert "restart" not in out
     assert np.all(["NRMSE" in line or "fitted" in line for line in out.splitlines()])
@@ -528,8 +565,8 @@ def test_fit_writes_nothing_to_stdout_but_results(files, tmp_path, capsys):
 def test_data_the_estimator_rejects_names_the_file(files, tmp_path, capsys):
     short = tmp_path / "short.csv"
     pd.read_csv(files[0]).head(8).to_csv(short, index=False)
-    assert _fit([short], tmp_path / "m.joblib", "--output-lags", "10") == 1
+    assert _fit([short], tmp_path / "m.sysid", "--output-lags", "10") == 1
     line = _error(capsys)
     assert "cannot fit to" in line and "short.csv" in line
     assert "outputs 'displacement'" in line and "at least" in line
-    assert not (tmp_path / "m.joblib").exists()
+    assert not (tmp_path / "m.sysid").exists()

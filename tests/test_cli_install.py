@@ -186,6 +186,6 @@ def test_fit_compiles_before_its_timed_fit(tmp_path, monkeypatch, capsys):
     )
     argv = ["fit", str(tmp_path / "r.csv"), "--input", "excitation", "--output"]
     argv += ["displacement", "--split-by", "realization", "--hidden", "0"]
-    assert main([*argv, "--save", str(tmp_path / "m.joblib")]) == 0
+    assert main([*argv, "--save", str(tmp_path / "m.sysid")]) == 0
     assert order == ["compile", "fit"]
     assert "compiling the numerical kernels" in capsys.readouterr().err

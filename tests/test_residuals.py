@@ -559,3 +559,27 @@ def test_plot_names_the_inputs_by_their_columns():
     anonymous = analyze_residuals(Zero(), X.to_numpy(), y, mode="simulation", max_lag=5)
     assert anonymous.input_names is None
     assert legend(anonymous) == ["input 0", "input 1"]
+
+
+def test_y_init_starts_free_runs_from_measured_samples():
+    from sysid_nn import TDLRegressor
+
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((700, 1))
+    y = lfilter([0.0, 0.5], [1.0, -1.8, 0.9], u[:, 0])
+    est = TDLRegressor(output_lags=2, input_lags=1, hidden_layer_sizes=(), n_init=1)
+    est.fit(u[:400], y[:400])
+    X, y_moving = u[500:], y[500:]  # starts in motion
+    from_window = analyze_residuals(
+        est, X, y_moving, mode="simulation", max_lag=10, y_init=30
+    )
+    expected = y_moving - est.simulate(X, y_init=y_moving[:30])
+    np.testing.assert_array_equal(from_window.residuals, expected)
+    # The window is left out of the tests, as skip leaves samples out.
+    from_rest = analyze_residuals(est, X, y_moving, mode="simulation", max_lag=10)
+    assert from_window.summary["n_samples"].iloc[0] == len(X) - 30
+    assert from_rest.summary["n_samples"].iloc[0] == len(X)
+    with pytest.raises(ValueError, match="y_init starts a free run"):
+        analyze_residuals(est, X, y_moving, max_lag=10, y_init=30)
+    with pytest.raises(ValueError, match="y_init must be an integer >= 0"):
+        analyze_residuals(est, X, y_moving, mode="simulation", y_init=-1)

@@ -59,15 +59,15 @@ def test_fit_and_validate_print_the_hint(tmp_path, capsys, monkeypatch):
     fit = ["fit", str(tmp_path / "r.csv"), "--input", "excitation", "--output"]
     fit += ["displacement", "--hidden", "0", *common]
     # The package's own noise-free oscillator is not chaotic: no hint.
-    assert main([*fit, "--save", str(tmp_path / "m.joblib")]) == 0
+    assert main([*fit, "--save", str(tmp_path / "m.sysid")]) == 0
     assert "depends on its start" not in capsys.readouterr().err
     monkeypatch.setattr(_sensitivity, "chaos_hint", lambda est, X: "runs part ways")
-    assert main([*fit, "--save", str(tmp_path / "m2.joblib")]) == 0
+    assert main([*fit, "--save", str(tmp_path / "m2.sysid")]) == 0
     assert "sysid-nn: warning: runs part ways" in capsys.readouterr().err
     validate = [
         "validate",
         "--model",
-        str(tmp_path / "m2.joblib"),
+        str(tmp_path / "m2.sysid"),
         str(tmp_path / "r.csv"),
     ]
     assert (

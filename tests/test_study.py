@@ -402,3 +402,77 @@ def test_report_does_not_claim_noise_in_noise_free_records(study):
     ]
     # A white misfit on the study's records is explained for what it is.
     assert bool(misfit) == ("carry no measurement noise" in report)
+
+
+def test_a_report_on_user_records_speaks_plainly(tmp_path):
+    """No paper's notation or figure numbers, in the files or the figures."""
+    import matplotlib.pyplot as plt
+
+    from sysid_nn import HystereticOscillator, TDLRegressor
+    from sysid_nn.study import StudyModel, run_validation
+    from sysid_nn.study._figures import _figures
+
+    rec = HystereticOscillator(r0=0.05).generate(2, n_samples=300, random_state=0)
+    records = {"force": list(rec.excitation), "x": list(rec.displacement)}
+    model = StudyModel(
+        "ARX", TDLRegressor(hidden_layer_sizes=(), n_init=1), ("force",), ("x",)
+    )
+    model.estimator.fit(*model.arrays(records))
+    out = tmp_path / "validation"
+    result = run_validation(model, records, out, dt=0.01, max_lag=10, series=None)
+    names = sorted(p.name for p in out.glob("*.png"))
+    assert "simulation_error_statistics.png" in names
+    assert not [n for n in names if n.startswith("fig")]
+    data = {"test": records, "dt": 0.01, "paper_terms": False}
+    for plain in (True, False):
+        data["paper_terms"] = not plain
+        build = _figures({"ARX": model}, data, result.evaluation, None)
+        fig = build["fig4_7_simulation_error_statistics.png"]()
+        ax = fig.axes[0]
+        texts = [ax.get_title(), *(t.get_text() for t in ax.get_legend().texts)]
+        plt.close(fig)
+        shown = " ".join(texts)
+        assert ("μ_Ns" in shown) != plain and ("fig. 4.7" in shown) != plain
+        if plain:
+            assert "Mean error and error std of simulation errors" in texts[0]
+            assert texts[1:] == ["mean error", "error std"]
+
+
+def test_figure_titles_fit_their_figures(tmp_path, monkeypatch):
+    """A long model label and the correlation figures' notes are not clipped."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from sysid_nn import HystereticOscillator, TDLRegressor
+    from sysid_nn.study import StudyModel, run_validation
+
+    rec = HystereticOscillator(r0=0.05).generate(2, n_samples=300, random_state=0)
+    records = {"force": list(rec.excitation), "x": list(rec.displacement)}
+    label = "TDL (" + ", ".join(f"option_{k}={k}" for k in range(12)) + ")"
+    est = TDLRegressor(hidden_layer_sizes=(), n_init=1)
+    model = StudyModel(label, est, ("force",), ("x",))
+    est.fit(*model.arrays(records))
+    overflow = {}
+    savefig = Figure.savefig
+
+    def measuring(fig, fname, *args, **kwargs):
+        result = savefig(fig, fname, *args, **kwargs)
+        renderer = FigureCanvasAgg(fig).get_renderer()
+        fig.draw(renderer)
+        titles = [fig._suptitle] if fig._suptitle else []
+        titles += [ax.title for ax in fig.axes if ax.title.get_text()]
+        box = fig.bbox
+        overflow[str(fname)] = [
+            t.get_text()
+            for t in titles
+            if t.get_window_extent(renderer).x0 < box.x0 - 1
+            or t.get_window_extent(renderer).x1 > box.x1 + 1
+        ]
+        return result
+
+    monkeypatch.setattr(Figure, "savefig", measuring)
+    run_validation(model, records, tmp_path / "v", dt=0.01, max_lag=10, series=None)
+    assert len(overflow) == 6
+    assert all(not clipped for clipped in overflow.values()), {
+        k.rsplit("/", 1)[1]: v for k, v in overflow.items() if v
+    }

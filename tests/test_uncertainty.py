@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+import re
 import warnings
 from itertools import pairwise
 
@@ -329,23 +330,42 @@ def test_cli_validate_draws_and_reports_bands(tmp_path, capsys):
     train, new = tmp_path / "train.csv", tmp_path / "new.csv"
     frames[0].to_csv(train, index=False)
     pd.concat(frames[1:]).to_csv(new, index=False)
-    model = tmp_path / "model.joblib"
+    model = tmp_path / "model.sysid"
     argv = ["fit", str(train), "--input", "force", "--output", "x", "--hidden", "0"]
     argv += ["--output-lags", "2", "--input-lags", "1", "--n-init", "1"]
     assert main([*argv, "--dt", "0.01", "--save", str(model)]) == 0
     out = tmp_path / "validation"
     argv = ["validate", "--model", str(model), str(new), "--split-by", "realization"]
     assert main([*argv, "--out", str(out), "--max-lag", "5", "--band", "0.9"]) == 0
-    printed = capsys.readouterr().out
+    captured = capsys.readouterr()
+    printed = captured.out
     table = pd.read_csv(out / "band.csv")
     assert list(table["record"]) == [0, 1]
     assert np.all((table["coverage"] > 0.8) & (table["coverage"] < 0.97))
+    assert np.all(table["band_std_over_output_std"] < 0.5)
     assert "90 % prediction band of the free run covers" in printed
+    assert "band is wide" not in captured.err
     assert (out / "band_0.png").exists() and (out / "band_1.png").exists()
     report = (out / "report.md").read_text()
     assert "`band.csv`" in report and "`band_<k>.png`" in report
     with pytest.raises(SystemExit):
         main([*argv, "--out", str(out), "--band", "95"])
+    # A band ten times the output's spread covers everything, and is flagged.
+    from sysid_nn import load_model, save_model
+
+    est, info = load_model(model, with_info=True)
+    est._noise_units = tuple(v + 100.0 for v in est._noise_units)
+    wide = tmp_path / "wide.sysid"
+    save_model(est, wide, inputs=info.inputs, outputs=info.outputs, dt=info.dt)
+    argv[2] = str(wide)
+    out = tmp_path / "wide"
+    assert main([*argv, "--out", str(out), "--max-lag", "5", "--band", "0.9"]) == 0
+    err = capsys.readouterr().err
+    found = re.search(r"warning: The band is wide: .* on average ([\d.]+) times", err)
+    assert found and 5 < float(found[1]) < 20
+    assert pd.read_csv(out / "band.csv")["band_std_over_output_std"].min() > 5
+    assert pd.read_csv(out / "band.csv")["coverage"].min() == 1.0
+    assert "The band is wide" in (out / "report.md").read_text()
 
 
 @pytest.mark.parametrize("rho", [0.0, 0.9])

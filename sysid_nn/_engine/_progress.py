@@ -13,6 +13,7 @@ Display only, not part of any estimator's API: the study reaches it through
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -100,7 +101,8 @@ def report_stage(
         Iterations the stage took.
     loss : callable
         Returns the training loss after the stage (evaluated only when
-        something is reported: it costs a pass over the data).
+        something is reported: it costs a pass over the data); not finite
+        for a skipped stage.
     validation : float
         Best validation loss so far.
     """
@@ -115,10 +117,16 @@ def report_stage(
         else "refinement of the linear model"
     )
     loss = loss()
+    # A stage whose starting loss is not finite was skipped (see the
+    # estimator's warning, which counts stages from 1 as these lines do).
+    done = (
+        f"{n_iter} iterations, loss {loss:.3e}"
+        if math.isfinite(loss)
+        else "skipped: the free run diverged from the weights it started at"
+    )
     line = (
         f"[{name}] {who} stage {stage + 1}/{n_stages} "
-        f"({segment}): {n_iter} iterations, loss {loss:.3e}, "
-        f"validation {validation:.3e}"
+        f"({segment}): {done}, validation {validation:.3e}"
     )
     if not _interactive():
         print(line, file=sys.stderr, flush=True)

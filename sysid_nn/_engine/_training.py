@@ -417,8 +417,11 @@ def fit_stages(est, train_data, val, restart, stop):
         objective = est._stage_objective(data, seg, mask, n_data, alpha)
         theta = objective.start(w)
         start_loss = objective.loss(theta)
+        segment = f"segment {'free run' if seg == _FREE_RUN else seg}"
+        where = (k, est._n_restarts()), (i_stage, len(stages)), segment
         if not np.isfinite(start_loss):
             record.skipped = True  # the stage diverges from here on
+            report_stage(est, *where, 0, lambda: np.inf, tracker.best_loss)
             continue
         record.loss.append(float(start_loss))
         if val is not None:
@@ -436,9 +439,7 @@ def fit_stages(est, train_data, val, restart, stop):
             restart.converged = ok or tracker.stopped
         report_stage(
             est,
-            (k, est._n_restarts()),
-            (i_stage, len(stages)),
-            f"segment {'free run' if seg == _FREE_RUN else seg}",
+            *where,
             nit,
             functools.partial(objective.loss, theta),
             tracker.best_loss,

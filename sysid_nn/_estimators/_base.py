@@ -320,12 +320,15 @@ class _RecurrentRegressorBase(
         chosen = result.run
         skipped = [i for i, stage in enumerate(chosen.history) if stage.skipped]
         if skipped:
+            # Counted from 1, as the progress lines count them.
+            counted = ", ".join(str(i + 1) for i in skipped)
             warnings.warn(
                 f"{type(self).__name__} skipped training stage"
-                f"{'s' if len(skipped) > 1 else ''} {skipped} of the chosen "
-                "restart: the free run diverged from the weights the stage "
-                "started at, so its loss was not finite. The weights come from "
-                "the stages before (skipped_stages_).",
+                f"{'s' if len(skipped) > 1 else ''} {counted} of "
+                f"{len(chosen.history)} of the chosen restart: the free run "
+                "diverged from the weights the stage started at, so its loss was "
+                "not finite. The weights come from the stages before "
+                f"(skipped_stages_ = {skipped}, counted from 0).",
                 ConvergenceWarning,
                 stacklevel=user_stacklevel(),
             )

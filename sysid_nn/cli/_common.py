@@ -75,7 +75,11 @@ def _add_output_flags(p: argparse.ArgumentParser, what: str) -> None:
         action="store_true",
         help=f"replace an existing {what} (never one of the inputs)",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress or summary")
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress or summary: nothing but warnings and errors (stderr)",
+    )
 
 
 # ------------------------------------------------------------------ outputs
@@ -205,11 +209,12 @@ def _command(
 
 
 # ------------------------------------------------------------------- scores
-def _scores(estimator, X, y, *, tail: float | None = None) -> dict:
+def _scores(estimator, X, y, *, tail: float | None = None, y_init: int = 0) -> dict:
     """Pooled NRMSE and RMSE per output, one-step and free run.
 
     ``tail`` scores only that last share of each record (the free run still
-    starts from rest at its beginning).
+    starts from rest at its beginning); ``y_init`` starts the free runs from
+    each record's first ``y_init`` measured samples and scores them after.
     """
     import numpy as np
 
@@ -217,15 +222,18 @@ def _scores(estimator, X, y, *, tail: float | None = None) -> dict:
 
     scores = {}
     for mode in ("prediction", "simulation"):
+        start = y_init if mode == "simulation" else 0
         y_hat = [
-            estimator.predict(x, y_k) if mode == "prediction" else estimator.simulate(x)
+            estimator.predict(x, y_k)
+            if mode == "prediction"
+            else estimator.simulate(x, y_init=y_k[:start] if start else None)
             for x, y_k in zip(X, y, strict=True)
         ]
-        true, pred = list(y), y_hat
+        cut = [start] * len(y)
         if tail is not None:
             cut = [len(y_k) - round(tail * len(y_k)) for y_k in y]
-            true = [y_k[c:] for y_k, c in zip(y, cut, strict=True)]
-            pred = [p[c:] for p, c in zip(y_hat, cut, strict=True)]
+        true = [y_k[c:] for y_k, c in zip(y, cut, strict=True)]
+        pred = [p[c:] for p, c in zip(y_hat, cut, strict=True)]
         values = np.atleast_1d(nrmse(true, pred, multioutput="raw_values"))
         spread = np.atleast_1d(np.std(np.concatenate(true), axis=0))
         scores[mode] = (values, values * spread)

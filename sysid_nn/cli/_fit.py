@@ -16,6 +16,7 @@ from sysid_nn.cli._common import (
     _command,
     _InputError,
     _one_line,
+    _OutputError,
     _positive_float,
     _positive_int,
     _score_lines,
@@ -25,7 +26,7 @@ from sysid_nn.cli._common import (
 )
 from sysid_nn.cli._records import (
     _check_columns,
-    _check_inputs_vary,
+    _check_columns_vary,
     _data_arguments,
     _frame_path,
     _read_records,
@@ -124,7 +125,14 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
             "validation_fraction)"
         ),
     )
-    p.add_argument("--save", type=Path, required=True, metavar="FILE", help="model")
+    p.add_argument(
+        "--save",
+        type=Path,
+        required=True,
+        metavar="FILE",
+        help="model file (e.g. model.sysid; data only, no code: see "
+        "sysid_nn.load_model)",
+    )
     _add_output_flags(p, "--save file")
     p.add_argument(
         "--verbose",
@@ -172,12 +180,9 @@ def _holdout(records: _Records, val: _Records | None):
 
 
 def _run_fit(args: argparse.Namespace) -> int:
-    import joblib
-    from sklearn.utils import Bunch
-
-    from sysid_nn import __version__
     from sysid_nn._analysis._sensitivity import chaos_hint
     from sysid_nn._compile import prepare_kernels
+    from sysid_nn._saved import _write
     from sysid_nn.study import StudyModel
 
     inputs, outputs = tuple(args.input), tuple(args.output)
@@ -186,10 +191,11 @@ def _run_fit(args: argparse.Namespace) -> int:
     estimator, params = _estimator(args)
     sources = [*args.files, *(args.val or [])]
     _check_output(args.save, "--save", overwrite=args.overwrite, inputs=sources)
+    _check_replaces_model(args.save)
     read = (args.split_by, args.time_column, args.sep, args.decimal)
     records = _read_records(args.files, [*inputs, *outputs], *read)
     val = _read_records(args.val, [*inputs, *outputs], *read) if args.val else None
-    _check_inputs_vary(records, inputs)
+    _check_columns_vary(records, inputs, outputs)
     dt = _resolve_dt(args.dt, records)
     if val is not None:
         _resolve_dt(dt, val, source="the training files' dt")
@@ -212,6 +218,7 @@ def _run_fit(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         _fit(estimator, X_fit, y_fit, X_val, y_val, sources, inputs, outputs)
+        _check_enough_samples(estimator, X_fit, args.files)
         if X_val is not None:
             scores = _scores(estimator, X_val, y_val)
             where = f"{len(X_val)} experiment(s) ({', '.join(held_names)})"
@@ -232,20 +239,18 @@ def _run_fit(args: argparse.Namespace) -> int:
     messages.append(chaos_hint(estimator, longest))
     for message in dict.fromkeys(m for m in messages if m):
         print(f"{_PROG}: warning: {message}", file=sys.stderr)
-    bundle = Bunch(
-        model=model,
-        dt=dt,
-        units=units,
-        files=[str(f) for f in args.files],
-        split_by=args.split_by,
-        sysid_nn_version=__version__,
-    )
-
-    def dump(tmp: Path) -> None:
-        with open(tmp, "wb") as f:
-            joblib.dump(bundle, f)
-
-    _write_atomic(args.save, dump)
+    info = {
+        "inputs": list(inputs),
+        "outputs": list(outputs),
+        "dt": dt,
+        "units": units,
+        "files": [str(f) for f in args.files],
+        "split_by": args.split_by,
+        "label": model.label,
+    }
+    _write_atomic(args.save, lambda tmp: _write(tmp, estimator, info))
+    if args.quiet:  # warnings only (above), no summary
+        return 0
     print(
         f"fitted {model.label} in {estimator.fit_time_:.1f} s: trained on "
         f"{len(X_fit)} experiment(s), weights chosen by early stopping "
@@ -259,6 +264,37 @@ def _run_fit(args: argparse.Namespace) -> int:
     )
     print("\n".join(_score_lines(scores, outputs, units)))
     return 0
+
+
+def _check_enough_samples(estimator, X: list, files) -> None:
+    """Refuse a fit with no more modelled samples than weights.
+
+    With as many weights as equations a model fits its records exactly,
+    whatever they hold, and its training scores mean nothing.
+    """
+    reach = estimator._history_length()
+    n_equations = estimator.n_outputs_ * sum(max(0, len(x) - reach) for x in X)
+    n_weights = estimator.coefs_.size
+    if n_equations <= n_weights:
+        raise _InputError(
+            f"the training records ({', '.join(map(str, files))}) are too short "
+            f"for the model: {n_equations} modelled output sample(s) after the "
+            f"first {reach} (the reach of its lags) for {n_weights} weights, so it "
+            "would fit them exactly whatever they hold. Give longer or more "
+            "records, or a smaller model (fewer --hidden units, lags or "
+            "--n-states); nothing was saved."
+        )
+
+
+def _check_replaces_model(path: Path) -> None:
+    """``--overwrite`` replaces a model file only, never data or anything else."""
+    from sysid_nn._saved import _is_model_file
+
+    if path.is_file() and not _is_model_file(path):
+        raise _OutputError(
+            f"{path} exists and is not a model file; --overwrite replaces only "
+            "models saved by `sysid-nn fit --save`. Choose another --save."
+        )
 
 
 def _fit(estimator, X, y, X_val, y_val, files, inputs, outputs) -> None:

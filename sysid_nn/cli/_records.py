@@ -374,16 +374,28 @@ def _check_columns(
         seen[column] = option
 
 
-def _check_inputs_vary(records: _Records, inputs: Sequence[str]) -> None:
-    """Refuse an input column that holds one value in every experiment."""
+def _check_columns_vary(
+    records: _Records, inputs: Sequence[str], outputs: Sequence[str]
+) -> None:
+    """Refuse a column that holds one value in every experiment.
+
+    An input that never changes excites nothing; an output that never
+    changes has no response to model (and standardising it divides by 0).
+    """
     import numpy as np
 
-    for column in inputs:
+    roles = [(c, "input", "excitation") for c in inputs]
+    roles += [(c, "output", "response") for c in outputs]
+    for column, role, meaning in roles:
         values = np.concatenate(records.columns[column])
         if values.size and np.all(values == values[0]):
+            what = (
+                "the model cannot learn the response to an input that never changes"
+                if role == "input"
+                else "there is no response to model"
+            )
             raise _InputError(
-                f"input column {column!r} holds the single value {values[0]:g} in "
-                f"every experiment ({', '.join(records.origins)}): the model "
-                "cannot learn the response to an input that never changes; "
-                "check that --input names the excitation column."
+                f"{role} column {column!r} holds the single value {values[0]:g} in "
+                f"every experiment ({', '.join(records.origins)}): {what}; "
+                f"check that --{role} names the {meaning} column."
             )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import warnings
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -180,6 +181,9 @@ def _statistics_figure(data, evaluation, mode, title) -> Any:
             title=title if len(outputs) == 1 else f"{title}: {_label(data, field)}",
             ax=ax,
         )
+        if not data.get("paper_terms", True):  # a user's records: plain names
+            handles, _ = ax.get_legend_handles_labels()
+            ax.legend(handles, ["mean error", "error std"])
     return fig
 
 
@@ -317,6 +321,88 @@ FIGURES = {
 }
 
 
+#: Share of the room a panel's title may take (the constrained layout moves
+#: panels a little after the titles are wrapped).
+_TITLE_SHARE = 0.95
+
+
+def _wrapped(text: str, font, width: float) -> str:
+    """``text`` with its lines broken between words to ``width`` points."""
+    from matplotlib.backends.backend_agg import RendererAgg
+
+    renderer = RendererAgg(1, 1, 72)  # 72 dpi: widths in points
+
+    def fits(line: str) -> bool:
+        w, _, _ = renderer.get_text_width_height_descent(line, font, ismath=False)
+        return w <= width
+
+    out = []
+    for paragraph in text.split("\n"):
+        line = ""
+        for word in paragraph.split(" "):
+            candidate = f"{line} {word}" if line else word
+            if line and not fits(candidate):
+                out.append(line)
+                candidate = word
+            line = candidate
+        out.append(line)
+    return "\n".join(out)
+
+
+def fit_titles(fig) -> None:
+    """Wrap the figure's and its panels' titles, and legend entries, to fit.
+
+    Long titles (a model label with all its options, the correlation
+    figures' explanations) are otherwise clipped at the figure's edges, and
+    a long legend entry squeezes its panel; the constrained layout makes room
+    for the extra lines.
+    """
+
+    def wrap(text, limit: float) -> None:
+        if text.get_text():
+            font = text.get_fontproperties()
+            text.set_text(_wrapped(text.get_text(), font, limit))
+
+    width = fig.get_figwidth() * 72
+    # A legend entry (a model's label) may take half its panel's width;
+    # then the layout places the panels as they will be drawn.
+    for ax in fig.axes:
+        legend = ax.get_legend()
+        for text in legend.get_texts() if legend is not None else []:
+            wrap(text, 0.5 * ax.get_position().width * width)
+    fig.draw_without_rendering()
+    if fig._suptitle is not None:
+        wrap(fig._suptitle, width)
+    for ax in fig.axes:
+        # A title is centred on its panel and may reach over the panel's
+        # margins, not over the figure's edges.
+        box = ax.get_position()
+        centre = (box.x0 + box.x1) / 2
+        room = _TITLE_SHARE * 2 * min(centre, 1 - centre) * width
+        for title in (ax.title, ax._left_title, ax._right_title):
+            wrap(title, room)
+
+
+#: The paper's names of the error statistics and the plain ones of a report
+#: on a user's own records (as in the report's tables).
+_PLAIN_STATISTICS = ("μ_Ns and σ_Ns of", "Mean error and error std of")
+
+
+def figure_caption(name: str, paper_terms: bool = True) -> str:
+    """The caption of figure ``name``; without the paper's figure numbers and
+    notation for a report on a user's own records."""
+    caption = FIGURES[name]
+    if paper_terms:
+        return caption
+    return re.sub(r" \(figs?\. [^)]*\)", "", caption).replace(*_PLAIN_STATISTICS)
+
+
+def figure_file(name: str, paper_terms: bool = True) -> str:
+    """The file name of figure ``name``: ``prediction.png`` rather than the
+    paper's ``fig4_2_prediction.png`` for a user's own records."""
+    return name if paper_terms else re.sub(r"^fig\d+_\d+_", "", name)
+
+
 def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
     """Figure builders by file name; those needing absent data are left out."""
     from sysid_nn.plotting import plot_records
@@ -334,6 +420,7 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
         )
 
     names = list(FIGURES)
+    paper = data.get("paper_terms", True)
     builders = {
         names[1]: lambda: _response_figure(
             models, data, evaluation, "prediction", "Prediction"
@@ -341,13 +428,13 @@ def _figures(models, data, evaluation, loops) -> dict[str, Callable[[], Any]]:
         names[2]: lambda: _correlation_figure(models, data, evaluation, "acf"),
         names[3]: lambda: _correlation_figure(models, data, evaluation, "ccf"),
         names[4]: lambda: _statistics_figure(
-            data, evaluation, "prediction", FIGURES[names[4]]
+            data, evaluation, "prediction", figure_caption(names[4], paper)
         ),
         names[5]: lambda: _response_figure(
             models, data, evaluation, "simulation", "Simulation"
         ),
         names[6]: lambda: _statistics_figure(
-            data, evaluation, "simulation", FIGURES[names[6]]
+            data, evaluation, "simulation", figure_caption(names[6], paper)
         ),
     }
     if "train" in data:

@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import os
 import platform
-import re
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from importlib import metadata
@@ -18,7 +17,7 @@ from sklearn.utils import Bunch
 
 import sysid_nn
 from sysid_nn.study._config import _QUICK_PARAMS, StudyConfig
-from sysid_nn.study._figures import FIGURES
+from sysid_nn.study._figures import FIGURES, figure_caption, figure_file
 from sysid_nn.study._models import StudyModel
 
 
@@ -431,7 +430,8 @@ def write_report(
         for i in figs:
             name = list(FIGURES)[i]
             if name in has:
-                lines += [f"![{_caption(name, paper_terms)}]({name})", ""]
+                shown = figure_file(name, paper_terms)
+                lines += [f"![{figure_caption(name, paper_terms)}]({shown})", ""]
         if mode == "simulation":
             lines += [
                 "Free-run residuals are coloured even for a good simulator (they "
@@ -446,15 +446,12 @@ def write_report(
     lines += [
         "- `summary.csv`: one row per model, scored output and mode (the tables)."
     ]
-    lines += [f"- `{name}`: {_caption(name, paper_terms)}" for name in figures]
+    lines += [
+        f"- `{figure_file(name, paper_terms)}`: {figure_caption(name, paper_terms)}"
+        for name in figures
+    ]
     lines += [f"- `{name}`: {about}" for name, about in (files or {}).items()]
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
-
-
-def _caption(name: str, paper_terms: bool) -> str:
-    """A figure's caption; without the paper's figure number for a user's test."""
-    caption = FIGURES[name]
-    return caption if paper_terms else re.sub(r" \(figs?\. [^)]*\)", "", caption)
 
 
 def _parallel_line(config: StudyConfig, scheduler: str | None) -> str:

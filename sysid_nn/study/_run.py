@@ -24,6 +24,8 @@ from sysid_nn.study._figures import (
     LONG_RECORD,
     _figures,
     _label,
+    figure_file,
+    fit_titles,
     hysteresis_loops,
     show_long_record,
 )
@@ -113,8 +115,11 @@ def _write_outputs(
     )
     summary.rename(columns=renamed or {}).to_csv(tmp / "summary.csv", index=False)
     builders = _figures(models, data, evaluation, loops)
+    paper = data.get("paper_terms", True)
     for name, build in _progress(builders.items(), len(builders), "figures", progress):
-        build().savefig(tmp / name, dpi=90)
+        fig = build()
+        fit_titles(fig)
+        fig.savefig(tmp / figure_file(name, paper), dpi=90)
     return summary, list(builders)
 
 
@@ -245,6 +250,7 @@ def run_validation(
     progress: bool = False,
     series: str | None = "csv",
     band: float | None = None,
+    y_init: int = 0,
 ) -> Bunch:
     """Validate a fitted model on measured records: the study's report on them.
 
@@ -287,13 +293,26 @@ def run_validation(
         Also draw each record's free run with its prediction band at this
         level (e.g. 0.95), ``band_<k>.png``, and write the share of samples
         inside it per record, ``band.csv``.
+    y_init : int, default=0
+        Start every record's free run from its first ``y_init`` measured
+        samples (the initial conditions whose free run fits them best, see
+        the estimators' ``simulate``) instead of from the model's rest, for
+        records that do not start at rest; the free runs (and bands) are
+        scored and tested after those samples. The report says which start
+        was used.
 
     Returns
     -------
     Bunch
         ``out_dir``, ``results``, ``summary``, ``evaluation``, ``series``
-        (the series' DataFrame, or None) and ``band_coverage`` (the pooled
-        share of samples inside the band, or None).
+        (the series' DataFrame, or None), ``band_coverage`` (the pooled
+        share of samples inside the band, or None) and ``band_width`` (the
+        band's mean standard deviation over the output's standard deviation,
+        of the widest output, or None; above 1 the band is flagged as too
+        wide for its coverage to mean much) and ``non_finite``: one Bunch
+        (``record``, ``mode``, ``output``, ``sample``) per record, mode and
+        output whose predictions or free run turned non-finite (diverged),
+        from ``sample`` (counted from 0) on; the report lists them.
 
     Examples
     --------
@@ -326,20 +345,31 @@ def run_validation(
     if series == "parquet":
         _check_parquet()
     models = {model.label: model}
+    # A user's records: plain names, no paper's notation or figure numbers.
     data = Bunch(
-        test=records, dt=float(dt), units=dict(units or {}), record_name="record"
+        test=records,
+        dt=float(dt),
+        units=dict(units or {}),
+        record_name="record",
+        paper_terms=False,
     )
     prepare_kernels(show=progress)
     with _staged_directory(out_dir, overwrite) as tmp:
         evaluation = evaluate(
-            models, data, config, outputs=model.outputs, progress=progress
+            models,
+            data,
+            config,
+            outputs=model.outputs,
+            progress=progress,
+            y_init=y_init,
         )
+        non_finite = _non_finite(evaluation, model.label)
         renamed = {"realization": "record", "n_realizations": "n_records"}
         summary, figures = _write_outputs(
             tmp, models, data, evaluation, None, progress, renamed
         )
         files = {}
-        table = coverage = None
+        table = coverage = width = None
         if series is not None:
             table = _series(model, records, evaluation, float(dt))
             if series == "csv":
@@ -351,10 +381,12 @@ def run_validation(
                 "(`<output>_predicted`) and free runs (`<output>_simulated`)."
             )
         if band is not None:
-            coverage = _write_bands(model, records, tmp, float(dt), band)
+            coverage, width = _write_bands(model, records, tmp, float(dt), band, y_init)
             files["band.csv"] = (
                 f"share of samples inside the {100 * band:g} % prediction band of "
-                f"the free run, per record (pooled: {100 * coverage:.1f} %)."
+                f"the free run, per record (pooled: {100 * coverage:.1f} %), and "
+                "the band's mean standard deviation over the output's."
+                + (f" {wide_band_warning(width)}" if width > _WIDE_BAND else "")
             )
             files["band_<k>.png"] = (
                 "free run of record k with its prediction band, over the "
@@ -369,6 +401,7 @@ def run_validation(
                 *setup,
                 f"{n} record(s) at dt = {dt:g} s; residual tests with "
                 f"max_lag={max_lag}, alpha={alpha}.",
+                _start_line(y_init),
                 f"Software: {_versions()}.",
                 f"Machine: {_machine()}.",
             ],
@@ -380,6 +413,9 @@ def run_validation(
             max_lag=max_lag,
             paper_terms=False,
             files=files,
+            extra={"Warnings": [f"- {describe_non_finite(b)}" for b in non_finite]}
+            if non_finite
+            else None,
         )
     return Bunch(
         out_dir=Path(out_dir),
@@ -388,24 +424,68 @@ def run_validation(
         evaluation=evaluation,
         series=table,
         band_coverage=coverage,
+        band_width=width,
+        non_finite=non_finite,
     )
 
 
-def _write_bands(model, records, out: Path, dt: float, level: float) -> float:
-    """Free runs with their prediction bands: figures, band.csv, pooled coverage."""
+#: A band whose standard deviation exceeds the output's own is flagged: it
+#: is no narrower than the spread of the output about its mean (an NRMSE of
+#: 1), so it covers most samples whatever the model does.
+_WIDE_BAND = 1.0
+
+
+def _band_width(y: list, std: list) -> np.ndarray:
+    """Per output: the band's mean standard deviation over the output's."""
+    Y, S = np.concatenate(y), np.concatenate(std)
+    spread = Y.std(axis=0)
+    return np.nanmean(S, axis=0) / np.where(spread > 0, spread, np.nan)
+
+
+def _start_line(y_init: int) -> str:
+    """How the free runs started, for the report."""
+    if not y_init:
+        return (
+            "Free runs start from rest: the model's settled state under zero "
+            "excitation before each record."
+        )
+    return (
+        f"Free runs start from each record's first {y_init} measured samples: "
+        "the initial conditions whose free run fits them best; the free runs are "
+        "scored and tested after those samples."
+    )
+
+
+def _write_bands(
+    model, records, out: Path, dt: float, level: float, y_init: int = 0
+) -> tuple[float, float]:
+    """Free runs with their prediction bands: figures, band.csv, the pooled
+    coverage and the widest band's width (see :func:`_band_width`), after
+    the first ``y_init`` samples when the runs start from them."""
     import matplotlib.pyplot as plt
 
     from sysid_nn.plotting import plot_band
     from sysid_nn.uncertainty import interval_coverage, normal_interval
 
     X, y = model.arrays(records)
-    mean, std = model.estimator.simulate(X, return_std=True)
-    rows, bounds = [], []
+    start = {"y_init": [yk[:y_init] for yk in y]} if y_init else {}
+    mean, std = model.estimator.simulate(X, return_std=True, **start)
+    rows, bounds, stds = [], [], []
     for k, (yk, mk, sk) in enumerate(zip(y, mean, std, strict=True)):
         yk, mk, sk = (np.reshape(a, (len(a), -1)) for a in (yk, mk, sk))
         lower, upper = normal_interval(mk, sk, level)
-        bounds.append((yk, lower, upper))
-        rows.append({"record": k, "coverage": interval_coverage(yk, lower, upper)})
+        scored = slice(y_init, None)
+        bounds.append((yk[scored], lower[scored], upper[scored]))
+        stds.append(sk[scored])
+        rows.append(
+            {
+                "record": k,
+                "coverage": interval_coverage(*bounds[-1]),
+                "band_std_over_output_std": float(
+                    np.max(_band_width([bounds[-1][0]], [stds[-1]]))
+                ),
+            }
+        )
         t = dt * model.step * np.arange(len(yk))
         ax = plot_band(t, mk[:, 0], sk[:, 0], level=level, label="simulated")
         ax.plot(t, yk[:, 0], "k-", linewidth=0.6, label="measured")
@@ -417,7 +497,52 @@ def _write_bands(model, records, out: Path, dt: float, level: float) -> float:
         ax.figure.savefig(out / f"band_{k}.png", dpi=90)
         plt.close(ax.figure)
     pd.DataFrame(rows).to_csv(out / "band.csv", index=False)
-    return interval_coverage(*(list(b) for b in zip(*bounds, strict=True)))
+    coverage = interval_coverage(*(list(b) for b in zip(*bounds, strict=True)))
+    width = _band_width([b[0] for b in bounds], stds)
+    return coverage, float(np.max(width))
+
+
+def _non_finite(evaluation: Bunch, label: str) -> list[Bunch]:
+    """Where the model's predictions or free run first turned non-finite."""
+    found = []
+    for mode in ("prediction", "simulation"):
+        for field in evaluation.outputs:
+            for j, e in enumerate(evaluation.errors[label, mode, field]):
+                bad = np.flatnonzero(~np.isfinite(e))
+                if bad.size:
+                    found.append(
+                        Bunch(record=j, mode=mode, output=field, sample=int(bad[0]))
+                    )
+    return found
+
+
+def describe_non_finite(entry: Bunch, record: str | None = None) -> str:
+    """A sentence on one entry of :func:`_non_finite`."""
+    what = "one-step predictions" if entry.mode == "prediction" else "free run"
+    where = record or f"record {entry.record}"
+    advice = (
+        "a one-step predictor that diverges on measured outputs has an "
+        "unstable innovation filter (ISSM) or met outputs far outside its "
+        "training range; check the record there"
+        if entry.mode == "prediction"
+        else "the model's free run left the range of its training outputs"
+    )
+    return (
+        f"The {what} of {entry.output!r} on {where} are not finite from sample "
+        f"{entry.sample} (counted from 0) on: {advice}. The scores of this record "
+        "count it as diverged."
+    )
+
+
+def wide_band_warning(width: float) -> str:
+    """What a band wider than the output's spread means for its coverage."""
+    return (
+        f"The band is wide: its standard deviation is on average {width:.2g} "
+        "times the output's, so its coverage says little about the model (a "
+        "band as wide as the output's own spread covers most samples whatever "
+        "the model does); the free run's errors and the bands' inputs (noise "
+        "and weight uncertainty) tell more."
+    )
 
 
 def _check_parquet() -> None:

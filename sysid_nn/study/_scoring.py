@@ -32,17 +32,21 @@ def _evaluate_record(
     dt: float,
     config: StudyConfig,
     outputs: Sequence[str] | None,
+    y_init: int = 0,
 ) -> tuple[list[dict], dict[tuple[str, str, str], np.ndarray], dict]:
     """All models, scored outputs and modes on record ``j``.
 
     Returns the table rows, the scored errors and the residual analyses;
-    ``config`` gives the residual tests' ``max_lag`` and ``alpha``.
+    ``config`` gives the residual tests' ``max_lag`` and ``alpha``. With
+    ``y_init`` the free runs start from the record's first ``y_init``
+    measured samples and are scored after them.
     """
     rows, errors, analyses = [], {}, {}
     for name, model in models.items():
         (X,), (y,) = model.arrays(records, [j])
         y = y.reshape(len(y), -1)
         for mode in MODES:
+            start = y_init if mode == "simulation" else 0
             # Divergence is recorded in the table, not warned about per run.
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
@@ -54,11 +58,12 @@ def _evaluate_record(
                     max_lag=config.max_lag,
                     alpha=config.alpha,
                     nonlinear=False,
+                    y_init=start,
                 )
             analyses[name, mode] = analysis
             residuals = np.asarray(analysis.residuals).reshape(len(y), -1)
             for k, field in _scored(model, outputs):
-                e, y_k = residuals[:, k], y[:, k]
+                e, y_k = residuals[start:, k], y[start:, k]
                 stats = error_statistics(e, dt * model.step)
                 # One verdict per test: every input must pass, the smallest p counts.
                 tests = (
@@ -82,7 +87,7 @@ def _evaluate_record(
                     row[f"{test}_p"] = float(tests.loc[test, "p_value"])
                     row[f"{test}_passed"] = bool(tests.loc[test, "passed"])
                 rows.append(row)
-                errors[name, mode, field] = e
+                errors[name, mode, field] = residuals[:, k]
     return rows, errors, analyses
 
 
@@ -94,6 +99,7 @@ def evaluate(
     records: str = "test",
     outputs: Sequence[str] | None = None,
     progress: bool = False,
+    y_init: int = 0,
 ) -> Bunch:
     """One-step prediction and free-run simulation on unseen realisations.
 
@@ -121,6 +127,10 @@ def evaluate(
         displacement, which every model has).
     progress : bool, default=False
         Show a progress bar (stderr).
+    y_init : int, default=0
+        Start every free run from the record's first ``y_init`` measured
+        samples (the estimator's ``simulate(X, y_init=...)``) instead of
+        from rest; the free runs are scored and tested after them.
 
     Returns
     -------
@@ -162,7 +172,7 @@ def evaluate(
             f"{sorted({f for m in models.values() for f in m.outputs})}."
         )
     task = delayed(_evaluate_record)
-    args = (models, recs, data.dt, config, outputs)
+    args = (models, recs, data.dt, config, outputs, y_init)
     # Outside a joblib backend context None means serial; inside (dask) the
     # context's own setting applies.
     parallel = Parallel(n_jobs=config.n_jobs, return_as="generator")
@@ -171,10 +181,15 @@ def evaluate(
     )
     results = pd.DataFrame([row for rows, _, _ in outputs for row in rows])
     errors = {key: [out[1][key] for out in outputs] for key in outputs[0][1]}
+    # Free runs from a measured window are scored after it.
+    starts = {mode: y_init if mode == "simulation" else 0 for mode in MODES}
     statistics = {
         mode: {
             field: {
-                m.label: error_statistics(errors[name, mode, field], data.dt * m.step)
+                m.label: error_statistics(
+                    [e[starts[mode] :] for e in errors[name, mode, field]],
+                    data.dt * m.step,
+                )
                 for name, m in models.items()
                 if (name, mode, field) in errors
             }

@@ -1,0 +1,44 @@
+"""Small fitted models shared by the tests of saving and export."""
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+
+def _record(n_outputs: int, seed: int = 0):
+    """A mildly non-linear record: ``n_outputs`` outputs of two inputs."""
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal((300, 2))
+    y1 = lfilter([0.0, 0.5], [1.0, -1.5, 0.7], u[:, 0])
+    y1 += 0.3 * np.tanh(y1)
+    y2 = lfilter([0.0, 0.3], [1.0, -0.5], u[:, 1]) + 0.2 * y1
+    y = np.column_stack([y1, y2])[:, :n_outputs]
+    return u, y[:, 0] if n_outputs == 1 else y
+
+
+def _estimator(kind: str):
+    from sysid_nn import ISSMRegressor, TDLRegressor
+
+    small = {"n_init": 1, "max_iter": 5, "random_state": 0}
+    if kind == "linear":
+        return TDLRegressor(hidden_layer_sizes=(), **small)
+    if kind == "tdl":
+        return TDLRegressor(hidden_layer_sizes=(3,), **small)
+    return ISSMRegressor(hidden_layer_sizes=(3,), **small)
+
+
+@pytest.fixture(scope="session")
+def fitted_models():
+    """``{(kind, n_outputs): (estimator, X, y)}`` for the linear model, the
+    TDL and the ISSM with one and two outputs (fitted once per session)."""
+    models = {}
+    for kind in ("linear", "tdl", "issm"):
+        for n_outputs in (1, 2):
+            X, y = _record(n_outputs)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # few iterations: not converged
+                est = _estimator(kind).fit(X, y)
+            models[kind, n_outputs] = (est, X, y)
+    return models
