@@ -29,6 +29,8 @@ _LAZY = {
     "InconsistentVersionWarning": "sysid_nn._exceptions",
     "UnstablePredictorWarning": "sysid_nn._issm",
     "load_model": "sysid_nn._saved",
+    "modal_parameters": "sysid_nn._modal",
+    "nonlinearity_test": "sysid_nn._nonlinearity",
 }
 
 __all__ = [
@@ -40,6 +42,8 @@ __all__ = [
     "TDLRegressor",
     "UnstablePredictorWarning",
     "load_model",
+    "modal_parameters",
+    "nonlinearity_test",
 ]
 
 
