@@ -29,6 +29,7 @@ _LAZY = {
     "InconsistentVersionWarning": "sysid_nn._exceptions",
     "UnstablePredictorWarning": "sysid_nn._issm",
     "load_model": "sysid_nn._saved",
+    "backbone": "sysid_nn._backbone",
     "modal_parameters": "sysid_nn._modal",
     "nonlinearity_test": "sysid_nn._nonlinearity",
 }
@@ -41,6 +42,7 @@ __all__ = [
     "ShearBuilding",
     "TDLRegressor",
     "UnstablePredictorWarning",
+    "backbone",
     "load_model",
     "modal_parameters",
     "nonlinearity_test",
