@@ -33,6 +33,7 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "panel_figure",
     "plot_autocorrelation",
+    "plot_backbone",
     "plot_band",
     "plot_cross_correlation",
     "plot_error_statistics",
@@ -728,5 +729,78 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
         label=f"n_states {selection.n_states}",
     )
     _finish(bottom, "order", "validation NRMSE", "Free run of the linear models")
+    top.figure.tight_layout()
+    return top.figure
+
+
+def plot_backbone(
+    curve: Any,
+    reference: Any = None,
+    *,
+    label: str = "model",
+    reference_label: str = "generator",
+    amplitude_label: str = "amplitude",
+    ax: Sequence[Axes] | None = None,
+) -> Figure:
+    """Frequency and damping ratio against amplitude (a backbone).
+
+    Top: the equivalent natural frequency; bottom: the equivalent damping
+    ratio; both against the response amplitude, as returned by
+    :func:`~sysid_nn.backbone`. A reference (e.g. the same analysis of the
+    generator's own equations) is drawn beneath in grey.
+
+    Parameters
+    ----------
+    curve : pandas.DataFrame
+        From :func:`~sysid_nn.backbone`: columns ``amplitude``,
+        ``frequency_hz``, ``damping_ratio``.
+    reference : pandas.DataFrame, optional
+        Another such curve, drawn beneath.
+    label, reference_label : str
+        Legend entries of ``curve`` and ``reference``.
+    amplitude_label : str, default="amplitude"
+        Label of the amplitude axis (give its units).
+    ax : pair of Axes, optional
+        Axes for the two panels; a new figure if None.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure drawn on.
+
+    Examples
+    --------
+    >>> from sysid_nn import HystereticOscillator, backbone
+    >>> curve = backbone(HystereticOscillator(r0=0.06), 0.01,
+    ...                  amplitudes=[0.001, 0.003, 0.005])
+    >>> fig = plot_backbone(curve, amplitude_label="amplitude [m]")
+    >>> len(fig.axes)
+    2
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close(fig)
+    """
+    columns = ("amplitude", "frequency_hz", "damping_ratio")
+    for name, frame in (("curve", curve), ("reference", reference)):
+        if frame is not None and not all(
+            c in getattr(frame, "columns", ()) for c in columns
+        ):
+            raise ValueError(
+                f"{name} must be a DataFrame returned by sysid_nn.backbone, with "
+                f"columns {', '.join(columns)}."
+            )
+    top, bottom = _new_panels(ax, 2, figsize=(6.4, 6.4), sharex=True)
+    for panel, column in ((top, "frequency_hz"), (bottom, "damping_ratio")):
+        if reference is not None:
+            panel.plot(
+                reference["amplitude"],
+                reference[column],
+                label=reference_label,
+                **_REFERENCE_STYLE,
+            )
+        panel.plot(
+            curve["amplitude"], curve[column], marker="o", label=label, **_MODEL_STYLE
+        )
+    _finish(top, "", "frequency [Hz]", "Backbone")
+    _finish(bottom, amplitude_label, "damping ratio", None)
     top.figure.tight_layout()
     return top.figure
