@@ -27,25 +27,29 @@ __all__ = ["backbone"]
 #: made the response a non-monotonic function of the strength as the
 #: structure softened out of tune.
 _BURST_CYCLES = 1
-#: The free decay starts at this multiple of the largest amplitude asked
-#: for (the hysteretic oscillator loses a third of its amplitude in half a
-#: period at twice its yield displacement)...
-_OVERSHOOT = 2.0
+#: The free decay's first reading is at this multiple of the largest
+#: amplitude asked for...
+_OVERSHOOT = 1.2
 #: ... and the record runs until the linear decay reaches this share of
 #: the smallest, plus :data:`_MARGIN_CYCLES` periods at each end.
 _UNDERSHOOT = 0.5
 _MARGIN_CYCLES = 4
 #: Longest simulated record, in samples.
 _MAX_SAMPLES = 2**17
-#: Secant steps of the burst's strength, and the tolerance on the peak.
-_MAX_STEPS = 12
+#: Steps of the burst's strength, and their factor.
+_MAX_STEPS = 16
+_STEP = 1.25
 #: Half periods per analysis window.
 _SPAN = 2
-_PEAK_TOL = 0.02
+#: Strength of a generator's probing burst (its excitation's units): far
+#: below the yield of the generators' defaults.
+_PROBE = 1e-4
 
 
 def _generator_sim(gen, dt, output, response):
-    """``(simulate(F), f1, zeta1, f2)`` of a HystereticOscillator or ShearBuilding."""
+    """``(simulate(F), probe, f1, zeta1, f2)`` of a HystereticOscillator or
+    ShearBuilding: the probe's strength, the first mode's frequency and
+    damping ratio, the second mode's frequency (None with one)."""
     if hasattr(gen, "modal_properties"):
         modes = gen.modal_properties()
         f = modes.frequency
@@ -55,17 +59,18 @@ def _generator_sim(gen, dt, output, response):
             return gen.simulate(F, dt, outputs=names)[response][:, output]
 
         second = float(f[1]) if len(f) > 1 else None
-        return sim, float(f[0]), float(modes.damping_ratio[0]), second
+        return sim, _PROBE, float(f[0]), float(modes.damping_ratio[0]), second
 
     def sim(F):
         return getattr(gen.simulate(F, dt), response)
 
     params = gen._physical_params()
-    return sim, params["omega0"] / (2 * math.pi), params["zeta"], None
+    return sim, _PROBE, params["omega0"] / (2 * math.pi), params["zeta"], None
 
 
 def _model_sim(est, dt, output, input):
-    """``(simulate(F), f1, zeta1, f2)`` of a fitted network (burst on ``input``)."""
+    """``(simulate(F), probe, f1, zeta1, f2)`` of a fitted network (burst on
+    ``input``; the probe's strength a hundredth of the input's spread)."""
     modes = modal_parameters(est, dt)
     modes = modes[modes.structural]
     if not len(modes) or not modes.damping_ratio.iloc[0] > 0:
@@ -82,12 +87,8 @@ def _model_sim(est, dt, output, input):
         return y if y.ndim == 1 else y[:, output]
 
     second = float(modes.frequency_hz.iloc[1]) if len(modes) > 1 else None
-    return (
-        sim,
-        float(modes.frequency_hz.iloc[0]),
-        float(modes.damping_ratio.iloc[0]),
-        second,
-    )
+    f1, zeta1 = float(modes.frequency_hz.iloc[0]), float(modes.damping_ratio.iloc[0])
+    return sim, 0.01 * float(est._x_scale[input]), f1, zeta1, second
 
 
 def _centred(y: np.ndarray) -> np.ndarray:
@@ -116,8 +117,13 @@ def _band(y, dt, f1, f2):
     return np.abs(analytic), np.unwrap(np.angle(analytic))
 
 
-def _decay(sim, dt, f1, zeta1, f2, amplitudes):
-    """Burst strength, then the envelope and phase of the free decay after it."""
+def _decay(sim, s0, dt, f1, zeta1, f2, amplitudes):
+    """The readings of the free decay whose first reading is above them all.
+
+    Returns ``(amp, f_n, zeta, strength)`` (see :func:`_windows`): the
+    burst's strength grows until the first reading's amplitude is
+    :data:`_OVERSHOOT` times the largest asked for, or stops growing.
+    """
     period = 1.0 / f1
     lead = round(_MARGIN_CYCLES * period / dt)
     burst = round(_BURST_CYCLES * period / dt)
@@ -137,49 +143,59 @@ def _decay(sim, dt, f1, zeta1, f2, amplitudes):
     def run(strength):
         F = np.zeros(n)
         F[lead:start] = strength * shape
-        env, phase = _band(np.asarray(sim(F), dtype=np.float64), dt, f1, f2)
-        return env, phase, float(env[start])
+        y = np.asarray(sim(F), dtype=np.float64)
+        if not np.all(np.isfinite(y)):
+            return None, np.nan
+        env, phase = _band(y, dt, f1, f2)
+        read = _windows(env, phase, dt, start, n - lead)
+        return read, (read[0][0] if len(read[0]) else 0.0)
 
+    # A weak burst first, where the response is linear in the strength,
+    # then stronger ones in steps until the first reading passes the
+    # target: a yielding structure's first reading grows ever more slowly
+    # with the strength, and falls once the burst throws it far beyond
+    # yield (its decay is then a drift); the last reading that still grew
+    # is kept.
     target = _OVERSHOOT * a_max
-    s0 = 1e-6
-    env, phase, peak = run(s0)
-    if not peak > 0:
-        raise ValueError("The burst gave no response: the output does not move.")
-    s1 = s0 * target / peak
+    _, first = run(s0)
+    if not first > 0:
+        raise ValueError(
+            "The burst gave no free decay to read: the output does not oscillate."
+        )
+    strength = s0 * target / first
+    kept = None
     for _ in range(_MAX_STEPS):
-        env, phase, p1 = run(s1)
-        if not np.isfinite(p1):
-            raise ValueError(
-                f"The free run diverged after a burst reaching about {target:.3g}: "
-                "the model is not valid at these amplitudes; ask for smaller ones."
-            )
-        if abs(p1 / target - 1) < _PEAK_TOL:
+        read, first = run(strength)
+        if not first > 0 or (kept is not None and first <= kept[0][0][0]):
             break
-        # Secant step on log(peak) against log(strength).
-        slope = math.log(p1 / peak) / math.log(s1 / s0) if s1 != s0 else 1.0
-        slope = slope if slope > 0.1 else 1.0
-        s0, peak = s1, p1
-        s1 = s1 * (target / p1) ** (1.0 / slope)
-    return env, phase, start, n - lead, s1
+        kept = (read, strength)
+        if first >= target:
+            break
+        strength *= _STEP
+    if kept is None:
+        raise ValueError(
+            "The burst gave no free decay to read: the free run diverged or "
+            "does not oscillate after it."
+        )
+    return (*kept[0], kept[1])
 
 
-def _read(env, phase, dt, start, stop, amplitudes):
-    """Frequency and damping of the decay where it passes each amplitude.
+def _windows(env, phase, dt, start, stop):
+    """Amplitude, natural frequency and damping ratio along the free decay.
 
     The analytic signal's phase cuts the decay into half periods; over each
     window of two of them (a whole period, so that the ripple a
     non-sinusoidal wave leaves on the envelope averages out) the mean
-    envelope is the amplitude, the window's length the damped period, and
-    the slope of the log amplitude between the windows half a period
-    before and after the decay rate. Read at each amplitude by linear
-    interpolation in log amplitude; NaN outside the decay's range.
+    envelope is the amplitude and the window's length the damped period,
+    and the slope of the log amplitude between the windows half a period
+    before and after is the decay rate.
     """
     t = np.arange(len(env)) * dt
     ph = np.maximum.accumulate(phase[start:stop])
     levels = np.arange(np.ceil(ph[0] / np.pi), np.floor(ph[-1] / np.pi) + 1) * np.pi
     bounds = np.interp(levels, ph, t[start:stop])
     if len(bounds) < 5:
-        return np.full((len(amplitudes), 2), np.nan)
+        return np.empty(0), np.empty(0), np.empty(0)
     lo, hi = bounds[:-_SPAN], bounds[_SPAN:]
     cum = np.concatenate([[0.0], np.cumsum(env[:-1] + env[1:]) * 0.5 * dt])
     area = np.interp(hi, t, cum) - np.interp(lo, t, cum)
@@ -187,16 +203,25 @@ def _read(env, phase, dt, start, stop, amplitudes):
     log_a = np.log(amp)
     sigma = -(log_a[2:] - log_a[:-2]) / (mid[2:] - mid[:-2])
     wn = np.hypot(wd[1:-1], sigma)
-    f_n, zeta, a = wn / (2 * np.pi), sigma / wn, np.log(amp[1:-1])
-    # The amplitude first falls through each level (np.interp needs it rising).
+    return amp[1:-1], wn / (2 * np.pi), sigma / wn
+
+
+def _read(amp, f_n, zeta, amplitudes) -> np.ndarray:
+    """``(frequency, damping)`` where the decay first falls through each amplitude.
+
+    Linear interpolation in log amplitude; NaN outside the decay's range.
+    """
+    out = np.full((len(amplitudes), 2), np.nan)
+    if not len(amp):
+        return out
+    a = np.log(amp)
     first = np.minimum.accumulate(a)
     keep = np.r_[True, first[1:] < first[:-1]]
-    x, order = a[keep][::-1], slice(None, None, -1)
-    out = np.empty((len(amplitudes), 2))
+    x = a[keep][::-1]  # rising, as np.interp needs
     for i, value in enumerate(np.log(amplitudes)):
-        inside = x[0] <= value <= x[-1]
-        out[i, 0] = np.interp(value, x, f_n[keep][order]) if inside else np.nan
-        out[i, 1] = np.interp(value, x, zeta[keep][order]) if inside else np.nan
+        if x[0] <= value <= x[-1]:
+            out[i, 0] = np.interp(value, x, f_n[keep][::-1])
+            out[i, 1] = np.interp(value, x, zeta[keep][::-1])
     return out
 
 
@@ -284,7 +309,7 @@ def backbone(
     >>> curve = backbone(HystereticOscillator(r0=0.06), 0.01,
     ...                  amplitudes=[0.002, 0.004, 0.006])
     >>> curve.frequency_hz.round(3).tolist()
-    [0.98, 0.961, 0.944]
+    [0.977, 0.96, 0.946]
     >>> bool(curve.damping_ratio.is_monotonic_increasing)
     True
     """
@@ -298,7 +323,7 @@ def backbone(
                 "amplitudes must be given for a generator: response amplitudes in "
                 "the units of the analysed response (e.g. [0.005, 0.01, 0.02] m)."
             )
-        sim, f1, zeta1, f2 = _generator_sim(estimator, dt, output, response)
+        sim, s0, f1, zeta1, f2 = _generator_sim(estimator, dt, output, response)
     else:
         check_is_fitted(estimator, "coefs_")
         for name, value, limit in (
@@ -314,7 +339,7 @@ def backbone(
                     f"{name} must be the index of one of the model's {limit} "
                     f"{name}s (0 to {limit - 1}); got {value!r}."
                 )
-        sim, f1, zeta1, f2 = _model_sim(estimator, dt, output, input)
+        sim, s0, f1, zeta1, f2 = _model_sim(estimator, dt, output, input)
         if amplitudes is None:
             low, high = estimator._y_range
             spread = float((high - low)[output] * estimator._y_scale[output])
@@ -325,8 +350,8 @@ def backbone(
             f"amplitudes must be positive finite response amplitudes; got "
             f"{amplitudes!r}."
         )
-    env, phase, start, stop, strength = _decay(sim, dt, f1, zeta1, f2, amps)
-    read = _read(env, phase, dt, start, stop, amps)
+    amp, f_n, zeta, strength = _decay(sim, s0, dt, f1, zeta1, f2, amps)
+    read = _read(amp, f_n, zeta, amps)
     curve = pd.DataFrame(
         {"amplitude": amps, "frequency_hz": read[:, 0], "damping_ratio": read[:, 1]}
     )
