@@ -168,6 +168,7 @@ def test_nyquist_mode_marked():
         ).fit(u, y)
     modes = modal_parameters(model, DT)
     assert list(modes.kind) == ["structural", "nyquist"]
+    assert list(modes.structural) == [True, False]
 
 
 @pytest.fixture(scope="module")
@@ -201,15 +202,16 @@ def test_building_modes_and_shapes(building_records, cls):
 
 # -------------------------------------------------------------- backbone
 def test_backbone_generator_small_amplitude():
-    """A linear oscillator's backbone is its natural frequency, undamped.
+    """A linear oscillator's backbone is its natural frequency and damping.
 
-    At 10 % damping the damped frequency is 0.5 % lower: the reading must
-    give the natural one.
+    At 20 % damping the damped frequency is 2 % lower than the natural
+    one: the reading must give the natural one, and the damping ratio
+    relative to it.
     """
-    osc = HystereticOscillator(r0=0.06, alpha=1.0, zeta=0.1)
+    osc = HystereticOscillator(r0=0.06, alpha=1.0, zeta=0.2)
     curve = backbone(osc, DT, amplitudes=[0.001, 0.002])
-    np.testing.assert_allclose(curve.frequency_hz, 1.0, rtol=1e-3)
-    np.testing.assert_allclose(curve.damping_ratio, 0.1, rtol=0.01)
+    np.testing.assert_allclose(curve.frequency_hz, 1.0, rtol=5e-3)
+    np.testing.assert_allclose(curve.damping_ratio, 0.2, rtol=5e-3)
 
 
 def test_backbone_of_linear_model_is_its_mode(arx_model):
