@@ -57,7 +57,9 @@ def modal_table(modes, outputs, *, show_all: bool = False) -> str:
     shapes = [c for c in modes.columns if c.startswith("shape_")]
     head = f"{'mode':>5}  {'frequency [Hz]':>14}  {f'{level:g} % interval':>13}"
     head += f"  {'damping ratio':>13}   {f'{level:g} % interval':>13}"
-    head += "".join(f"  {name:>10}" for name in outputs[: len(shapes)])
+    names = outputs[: len(shapes)]
+    widths = [max(10, len(name)) for name in names]
+    head += "".join(f"  {name:>{w}}" for name, w in zip(names, widths, strict=True))
     if show_all:
         head += "  kind"
     lines = [head]
@@ -68,7 +70,9 @@ def modal_table(modes, outputs, *, show_all: bool = False) -> str:
             f"  {row.damping_ratio:>13.4f} "
             f"[{row.damping_ratio_low:.4f}, {row.damping_ratio_high:.4f}]"
         )
-        line += "".join(f"  {getattr(row, c):>10.3f}" for c in shapes)
+        line += "".join(
+            f"  {getattr(row, c):>{w}.3f}" for c, w in zip(shapes, widths, strict=True)
+        )
         if show_all:
             line += f"  {row.kind}"
         lines.append(line)
