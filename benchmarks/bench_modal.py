@@ -7,8 +7,9 @@ Sections:
     non-linear at small amplitude (``alpha=0.1``, ground motion at 1 % of the
     calibrated strength: peak storey drifts about 2 % of the yield drift;
     at 5 % the Bouc-Wen loops, which dissipate at any amplitude for
-    ``n = 1``, added 20-40 % to the damping ratios), all floor accelerations measured at dt = 0.02 s, clean and with
-    2 % white output noise (of each output's standard deviation). Each
+    ``n = 1``, added 20-40 % to the damping ratios), all floor
+    accelerations measured at dt = 0.02 s, clean and with 2 % white output
+    noise (of each output's standard deviation). Each
     repetition draws one fresh 2000-sample record, fits the linear TDL
     (``hidden_layer_sizes=()``) and the linear ISSM, and reads
     :func:`sysid_nn.modal_parameters`. Reported per case: the largest
@@ -149,9 +150,11 @@ def buildings(reps, reps_clean, lines, networks=False):
             "linear ISSM": lambda: ISSMRegressor(hidden_layer_sizes=(), n_init=1),
         }
     lines += [
-        "| storeys | building | noise | model | reps | max freq error % (median, range) "
-        "| max damping error % (median, range) | all within 1 % / 10 % | 95 % coverage "
-        "freq | 95 % coverage damping | extra structural modes (median, max) "
+        "| storeys | building | noise | model | reps "
+        "| max freq error % (median, range) "
+        "| max damping error % (median, range) | all within 1 % / 10 % "
+        "| 95 % coverage freq | 95 % coverage damping "
+        "| extra structural modes (median, max) "
         "| missed | readout ms (median) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -181,8 +184,10 @@ def buildings(reps, reps_clean, lines, networks=False):
             s = _summary(scores)
             label = "linear" if linear else f"alpha=0.1, r0 x {SMALL}"
             if "ef" not in s:
-                lines.append(f"| {n} | {label} | {noise:.0%} | {name} | {count} | "
-                             f"- | - | 0 | - | - | - | {s['missed']} | - |")  # fmt: skip
+                lines.append(
+                    f"| {n} | {label} | {noise:.0%} | {name} | {count} | "
+                    f"- | - | 0 | - | - | - | {s['missed']} | - |"
+                )
                 continue
             lines.append(
                 f"| {n} | {label} | {noise:.0%} | {name} | {count} | {_pct(s['ef'])} "
