@@ -30,6 +30,7 @@ _LAZY = {
     "UnstablePredictorWarning": "sysid_nn._issm",
     "load_model": "sysid_nn._saved",
     "backbone": "sysid_nn._backbone",
+    "instantaneous_frequency": "sysid_nn._modal",
     "modal_parameters": "sysid_nn._modal",
     "nonlinearity_test": "sysid_nn._nonlinearity",
 }
@@ -43,6 +44,7 @@ __all__ = [
     "TDLRegressor",
     "UnstablePredictorWarning",
     "backbone",
+    "instantaneous_frequency",
     "load_model",
     "modal_parameters",
     "nonlinearity_test",

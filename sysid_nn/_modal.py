@@ -25,9 +25,10 @@ import pandas as pd
 from scipy.stats import norm
 from sklearn.utils.validation import check_is_fitted
 
+from sysid_nn._data import _FREE_RUN
 from sysid_nn._kernels._mlp import LOGISTIC
 
-__all__ = ["modal_parameters"]
+__all__ = ["instantaneous_frequency", "modal_parameters"]
 
 #: A pole whose damped frequency is above this share of the Nyquist
 #: frequency is marked ``"nyquist"``: the sampling does not resolve it.
@@ -260,6 +261,7 @@ def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
     See Also
     --------
     sysid_nn.backbone : Frequency and damping against response amplitude.
+    instantaneous_frequency : The first mode along a record.
     sysid_nn.ShearBuilding.modal_properties : The generator's true modes.
 
     Examples
@@ -355,3 +357,122 @@ def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
     table.index.name = "mode"
     table.attrs.update(dt=dt, level=float(level))
     return table
+
+
+def _local_state_matrices(est, lin: _Linearisation, X: np.ndarray):
+    """The state matrix along the free run over ``X`` from rest, per sample.
+
+    The TDL's network inputs of its own run (``Z``) give the companion
+    matrix at every sample; the ISSM's kernels return ``d x(t) / d z`` of
+    the run (``D``). Rows after a divergence are NaN.
+    """
+    Xs, leads = est._from_rest([X], True)
+    data = est._stack(Xs, None)
+    w = est.coefs_
+    rows = data.modelled[int(leads[0]) :]
+    out = np.full((len(rows), lin.n, lin.n), np.nan)
+    if lin.tdl:
+        _, _, diverged, (_, Z, _) = est._run(w, data, _FREE_RUN, False)
+        for i, r in enumerate(rows):
+            _, jz = _forward(w, lin.layout, lin.act, Z[r])
+            A = np.eye(lin.n, k=-lin.p)
+            A[: lin.p] = (jz @ lin.S)[:, : lin.n]
+            out[i] = A
+    else:
+        X0 = est._initial_states(data)
+        _, _, diverged, (_, _, _, D) = est._run_from(
+            w, data, _FREE_RUN, False, X0, want_lin=True, keep_state=True
+        )
+        out[:] = D[rows][:, :, : lin.n]
+    bad = int(diverged[0]) - int(leads[0])
+    if diverged[0] >= 0:
+        out[max(bad, 0) :] = np.nan
+    return out
+
+
+def instantaneous_frequency(estimator, X, dt) -> pd.DataFrame:
+    """The first mode's frequency and damping along a record, by local linearisation.
+
+    The model is simulated over the excitation ``X`` from rest (as
+    ``simulate`` does), and at every sample linearised where its run is
+    (the TDL network at its current lags, the ISSM at its current state,
+    excitation as it is): the mode followed is the first structural mode of
+    the linearisation at rest (:func:`modal_parameters`), tracked from
+    sample to sample as the complex pole nearest in frequency to the one
+    before. A yielding structure's identified model shows its first mode
+    softening during the strong shaking and recovering after it.
+
+    Parameters
+    ----------
+    estimator : TDLRegressor or ISSMRegressor
+        A fitted model.
+    X : array-like of shape (n_samples, n_inputs)
+        Excitation of one record.
+    dt : float
+        Sampling interval of the training records in seconds.
+
+    Returns
+    -------
+    track : pandas.DataFrame
+        One row per sample: ``t`` (seconds from the record's start),
+        ``frequency_hz`` and ``damping_ratio`` of the local linearisation's
+        mode (NaN where the run diverged or no complex pole is left).
+
+    See Also
+    --------
+    modal_parameters : The modes of the linearisation at rest.
+    sysid_nn.plotting.plot_instantaneous_frequency : Draws the track.
+
+    Examples
+    --------
+    A linear model's local linearisation is the same everywhere:
+
+    >>> import numpy as np
+    >>> from scipy.signal import lfilter
+    >>> from sysid_nn import TDLRegressor, instantaneous_frequency
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal((500, 1))
+    >>> y = lfilter([0.0, 1.0], [1.0, -2 * 0.9 * np.cos(0.3), 0.81], u[:, 0])
+    >>> model = TDLRegressor(output_lags=2, input_lags=1, hidden_layer_sizes=(),
+    ...                      n_init=1, random_state=0).fit(u, y)
+    >>> track = instantaneous_frequency(model, u, dt=0.01)
+    >>> bool(np.allclose(track.frequency_hz, modal_parameters(model, 0.01)
+    ...                  .frequency_hz[0]))
+    True
+    """
+    dt = _check_dt(dt)
+    check_is_fitted(estimator, "coefs_")
+    X = np.asarray(X, dtype=np.float64)
+    if X.ndim == 1:
+        X = X[:, None]
+    if X.ndim != 2 or X.shape[1] != estimator.n_features_in_ or not len(X):
+        raise ValueError(
+            f"X must be one record of shape (n_samples, {estimator.n_features_in_}) "
+            f"(the model's inputs); got shape {X.shape}."
+        )
+    rest = modal_parameters(estimator, dt)
+    rest = rest[rest.structural]
+    if not len(rest):
+        raise ValueError(
+            "The model's linearisation at rest has no structural mode to follow "
+            "(see sysid_nn.modal_parameters with its numerical modes)."
+        )
+    lin = _Linearisation(estimator)
+    mats = _local_state_matrices(estimator, lin, X)
+    freq = np.full(len(mats), np.nan)
+    zeta = np.full(len(mats), np.nan)
+    last = float(rest.frequency_hz.iloc[0])
+    for i, A in enumerate(mats):
+        if not np.all(np.isfinite(A)):
+            continue
+        lam = np.linalg.eigvals(A)
+        lam = lam[(lam.imag > _REAL_TOL * np.abs(lam)) & (np.abs(lam) > 0)]
+        lam = lam[np.abs(np.angle(lam)) <= _NYQUIST_SHARE * np.pi]
+        if not len(lam):
+            continue
+        f, z, _ = _to_continuous(lam, dt)
+        k = int(np.argmin(np.abs(f - last)))
+        freq[i], zeta[i], last = f[k], z[k], f[k]
+    return pd.DataFrame(
+        {"t": dt * np.arange(len(mats)), "frequency_hz": freq, "damping_ratio": zeta}
+    )

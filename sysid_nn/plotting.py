@@ -38,6 +38,7 @@ __all__ = [
     "plot_cross_correlation",
     "plot_error_statistics",
     "plot_hysteresis",
+    "plot_instantaneous_frequency",
     "plot_order_selection",
     "plot_records",
     "plot_residual_analysis",
@@ -804,3 +805,53 @@ def plot_backbone(
     _finish(bottom, amplitude_label, "damping ratio", None)
     top.figure.tight_layout()
     return top.figure
+
+
+@_document_axes
+def plot_instantaneous_frequency(
+    track: Any,
+    *,
+    rest: float | None = None,
+    title: str | None = "First mode along the record",
+    ax: Axes | None = None,
+) -> Axes:
+    """The first mode's frequency along a record, by local linearisation.
+
+    Parameters
+    ----------
+    track : pandas.DataFrame
+        From :func:`~sysid_nn.instantaneous_frequency`: columns ``t`` and
+        ``frequency_hz``.
+    rest : float, optional
+        A frequency drawn as a dotted line for reference (e.g. the first
+        mode of :func:`~sysid_nn.modal_parameters`, at rest).
+    %(title_ax)s
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes drawn on.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> track = pd.DataFrame({"t": [0.0, 0.01, 0.02],
+    ...                       "frequency_hz": [1.0, 0.9, 0.95]})
+    >>> ax = plot_instantaneous_frequency(track, rest=1.0)
+    >>> len(ax.lines)
+    2
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close(ax.figure)
+    """
+    if not all(c in getattr(track, "columns", ()) for c in ("t", "frequency_hz")):
+        raise ValueError(
+            "track must be a DataFrame returned by sysid_nn.instantaneous_frequency, "
+            "with columns t and frequency_hz."
+        )
+    ax = _new_axes(ax)
+    ax.plot(
+        track["t"], track["frequency_hz"], label="local linearisation", **_MODEL_STYLE
+    )
+    if rest is not None:
+        ax.axhline(rest, label=f"at rest, {rest:.3g} Hz", **_BAND_STYLE)
+    return _finish(ax, "time [s]", "frequency [Hz]", title)

@@ -13,6 +13,7 @@ from sysid_nn import (
     ShearBuilding,
     TDLRegressor,
     backbone,
+    instantaneous_frequency,
     modal_parameters,
     nonlinearity_test,
 )
@@ -290,6 +291,27 @@ def test_nonlinearity_not_found_on_linear_system():
     assert result.mean_loss_network != result.mean_loss_linear
     assert result.pvalue > 0.05
     assert "does not simulate" in result.verdict
+
+
+def test_instantaneous_frequency_drops_in_strong_shaking(oscillator_fit):
+    net, X, y = oscillator_fit
+    track = instantaneous_frequency(net, X[4], DT)
+    assert len(track) == len(y[4])
+    np.testing.assert_allclose(track.t[1] - track.t[0], DT)
+    rest = modal_parameters(net, DT)
+    f_rest = rest[rest.structural].frequency_hz.iloc[0]
+    # The run starts at rest: the rest's mode.
+    np.testing.assert_allclose(track.frequency_hz[0], f_rest, rtol=1e-3)
+    # Around the largest displacement (2-3 times the yield) it has softened.
+    peak = int(np.argmax(np.abs(y[4])))
+    assert np.nanmean(track.frequency_hz[peak - 50 : peak + 50]) < 0.9 * f_rest
+
+
+def test_instantaneous_frequency_arguments(arx_model):
+    with pytest.raises(ValueError, match="X must be one record"):
+        instantaneous_frequency(arx_model, np.zeros((10, 2)), DT)
+    with pytest.raises(ValueError, match="dt must be"):
+        instantaneous_frequency(arx_model, np.zeros((10, 1)), -1.0)
 
 
 def test_nonlinearity_one_sided(oscillator_fit):
