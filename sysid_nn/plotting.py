@@ -734,6 +734,7 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
     return top.figure
 
 
+@_document_axes
 def plot_backbone(
     curve: Any,
     reference: Any = None,
@@ -761,13 +762,12 @@ def plot_backbone(
         Legend entries of ``curve`` and ``reference``.
     amplitude_label : str, default="amplitude"
         Label of the amplitude axis (give its units).
-    ax : pair of Axes, optional
-        Axes for the two panels; a new figure if None.
+    %(ax_pair)s
 
     Returns
     -------
     matplotlib.figure.Figure
-        The figure drawn on.
+        The figure of the two panels.
 
     Examples
     --------

@@ -139,16 +139,24 @@ def test_intervals_shrink_and_cover():
     assert hits >= 16
 
 
+def _model_of_poles(poles):
+    """The linear TDL fitted to an ARX system of the given poles (exact)."""
+    u = np.random.default_rng(0).standard_normal(800)[:, None]
+    y = lfilter([0.0, 1.0], np.real(np.poly(poles)), u[:, 0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a mode near Nyquist looks like noise
+        return TDLRegressor(
+            output_lags=len(poles),
+            input_lags=1,
+            hidden_layer_sizes=(),
+            n_init=1,
+            random_state=0,
+        ).fit(u, y)
+
+
 def test_numerical_modes_marked():
     """A first-order lag beside one mode: a real pole, not structural."""
-    rng = np.random.default_rng(0)
-    u = rng.standard_normal(800)[:, None]
-    poles = np.r_[_poles(MODES[:1], DT), 0.5]
-    y = lfilter([0.0, 1.0], np.real(np.poly(poles)), u[:, 0])
-    model = TDLRegressor(
-        output_lags=3, input_lags=1, hidden_layer_sizes=(), n_init=1, random_state=0
-    ).fit(u, y)
-    modes = modal_parameters(model, DT)
+    modes = modal_parameters(_model_of_poles(np.r_[_poles(MODES[:1], DT), 0.5]), DT)
     assert list(modes.kind) == ["structural", "real"]
     assert list(modes.structural) == [True, False]
     np.testing.assert_allclose(modes.frequency_hz[0], 2.0, rtol=1e-6)
@@ -158,16 +166,9 @@ def test_numerical_modes_marked():
 
 
 def test_nyquist_mode_marked():
-    rng = np.random.default_rng(0)
-    u = rng.standard_normal(800)[:, None]
-    poles = np.r_[_poles([(2.0, 0.03), (45.0, 0.02)], DT)]
-    y = lfilter([0.0, 1.0], np.real(np.poly(poles)), u[:, 0])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the 45 Hz mode looks like noise
-        model = TDLRegressor(
-            output_lags=4, input_lags=1, hidden_layer_sizes=(), n_init=1, random_state=0
-        ).fit(u, y)
-    modes = modal_parameters(model, DT)
+    modes = modal_parameters(
+        _model_of_poles(_poles([(2.0, 0.03), (45.0, 0.02)], DT)), DT
+    )
     assert list(modes.kind) == ["structural", "nyquist"]
     assert list(modes.structural) == [True, False]
 
