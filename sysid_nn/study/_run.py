@@ -37,6 +37,7 @@ from sysid_nn.study._report import (
     write_report,
 )
 from sysid_nn.study._scoring import evaluate, summarize
+from sysid_nn.study._structure import structure_lines
 
 
 @contextlib.contextmanager
@@ -361,6 +362,8 @@ def run_validation(
                 "measured response."
             )
         n = summary["n_realizations"].iloc[0]
+        X, y = model.arrays(records)
+        structure = structure_lines(model.estimator, X, y, float(dt))
         write_report(
             tmp / "report.md",
             summary,
@@ -380,6 +383,7 @@ def run_validation(
             max_lag=max_lag,
             paper_terms=False,
             files=files,
+            extra={"The structure": structure},
         )
     return Bunch(
         out_dir=Path(out_dir),
