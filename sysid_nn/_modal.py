@@ -235,9 +235,9 @@ def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
     short of it: on linear models of a three-storey building (one record,
     2 % output noise) the spread of the frequencies and damping ratios over
     repeated records was 1.5-4 times the one the intervals claim, and
-    0.5-1.3 times with ``early_stopping=False``. Fit the model you read the
-    modes of without early stopping (see the user guide's page on the
-    structure).
+    0.5-1.3 times with ``early_stopping=False``. Fit a linear model you read
+    the modes of without early stopping; a network may need its early
+    stopping (see the user guide's page on the structure).
 
     Parameters
     ----------

@@ -115,6 +115,14 @@ def nonlinearity_test(
     The records must be ones the fit did not see: on its training records
     the network is better by construction.
 
+    The null hypothesis is that the network is no better than *this* linear
+    model. The fit's own linear model stops early as the restarts do, and a
+    network beat it on linear buildings (2 % output noise, two training
+    records) in 19 of 50 repetitions at the 5 % level; against a linear model
+    fitted to the same records with ``early_stopping=False`` (given as
+    ``linear_model``) in 1 of 20. Pass such a model for a verdict on the
+    structure (see the user guide's page on the structure).
+
     Parameters
     ----------
     estimator : TDLRegressor or ISSMRegressor
@@ -127,6 +135,7 @@ def nonlinearity_test(
         Their measured outputs.
     linear_model : fitted estimator, default=None
         The linear model to compare with instead of the fit's own (for a
+        verdict on the structure, one with ``early_stopping=False``; for a
         model that keeps none, e.g. one fitted by an earlier version):
         anything with ``simulate(X)``, fitted to the same training records.
     burn_in : int, default=0
