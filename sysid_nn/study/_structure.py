@@ -16,11 +16,14 @@ def structure_lines(estimator, X: list, y: list, dt: float) -> list[str]:
 
     Examples
     --------
+    A linear model with its poles at ``0.9 exp(+-0.3i)``:
+
     >>> import numpy as np
     >>> from scipy.signal import lfilter
     >>> from sysid_nn import TDLRegressor
-    >>> u = np.random.default_rng(0).standard_normal((400, 1))
-    >>> y = lfilter([0.0, 1.0], [1.0, -2 * 0.9 * np.cos(0.3), 0.81], u[:, 0])
+    >>> rng = np.random.default_rng(0)
+    >>> u, a = rng.standard_normal((400, 1)), np.poly(0.9 * np.exp([0.3j, -0.3j]))
+    >>> y = lfilter([0.0, 1.0], a.real, u[:, 0])
     >>> model = TDLRegressor(output_lags=2, input_lags=1, hidden_layer_sizes=(),
     ...                      n_init=1, random_state=0).fit(u, y)
     >>> print("\\n".join(structure_lines(model, [u], [y], 0.01)[2:5]))
