@@ -37,6 +37,10 @@ _LAZY = {
     "save_model": "sysid_nn._saved",
     "export_onnx": "sysid_nn._export",
     "to_dlti": "sysid_nn._export",
+    "backbone": "sysid_nn._analysis._backbone",
+    "instantaneous_frequency": "sysid_nn._analysis._modal",
+    "modal_parameters": "sysid_nn._analysis._modal",
+    "nonlinearity_test": "sysid_nn._analysis._nonlinearity",
 }
 
 __all__ = [
@@ -47,8 +51,12 @@ __all__ = [
     "ShearBuilding",
     "TDLRegressor",
     "UnstablePredictorWarning",
+    "backbone",
     "export_onnx",
+    "instantaneous_frequency",
     "load_model",
+    "modal_parameters",
+    "nonlinearity_test",
     "save_model",
     "to_dlti",
 ]

@@ -33,10 +33,12 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "panel_figure",
     "plot_autocorrelation",
+    "plot_backbone",
     "plot_band",
     "plot_cross_correlation",
     "plot_error_statistics",
     "plot_hysteresis",
+    "plot_instantaneous_frequency",
     "plot_order_selection",
     "plot_records",
     "plot_residual_analysis",
@@ -730,3 +732,126 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
     _finish(bottom, "order", "validation NRMSE", "Free run of the linear models")
     top.figure.tight_layout()
     return top.figure
+
+
+@_document_axes
+def plot_backbone(
+    curve: Any,
+    reference: Any = None,
+    *,
+    label: str = "model",
+    reference_label: str = "generator",
+    amplitude_label: str = "amplitude",
+    ax: Sequence[Axes] | None = None,
+) -> Figure:
+    """Frequency and damping ratio against amplitude (a backbone).
+
+    Top: the equivalent natural frequency; bottom: the equivalent damping
+    ratio; both against the response amplitude, as returned by
+    :func:`~sysid_nn.backbone`. A reference (e.g. the same analysis of the
+    generator's own equations) is drawn beneath in grey.
+
+    Parameters
+    ----------
+    curve : pandas.DataFrame
+        From :func:`~sysid_nn.backbone`: columns ``amplitude``,
+        ``frequency_hz``, ``damping_ratio``.
+    reference : pandas.DataFrame, optional
+        Another such curve, drawn beneath.
+    label, reference_label : str
+        Legend entries of ``curve`` and ``reference``.
+    amplitude_label : str, default="amplitude"
+        Label of the amplitude axis (give its units).
+    %(ax_pair)s
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure of the two panels.
+
+    Examples
+    --------
+    >>> from sysid_nn import HystereticOscillator, backbone
+    >>> curve = backbone(HystereticOscillator(r0=0.06), 0.01,
+    ...                  amplitudes=[0.001, 0.003, 0.005])
+    >>> fig = plot_backbone(curve, amplitude_label="amplitude [m]")
+    >>> len(fig.axes)
+    2
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close(fig)
+    """
+    columns = ("amplitude", "frequency_hz", "damping_ratio")
+    for name, frame in (("curve", curve), ("reference", reference)):
+        if frame is not None and not all(
+            c in getattr(frame, "columns", ()) for c in columns
+        ):
+            raise ValueError(
+                f"{name} must be a DataFrame returned by sysid_nn.backbone, with "
+                f"columns {', '.join(columns)}."
+            )
+    top, bottom = _new_panels(ax, 2, figsize=(6.4, 6.4), sharex=True)
+    for panel, column in ((top, "frequency_hz"), (bottom, "damping_ratio")):
+        if reference is not None:
+            panel.plot(
+                reference["amplitude"],
+                reference[column],
+                label=reference_label,
+                **_REFERENCE_STYLE,
+            )
+        panel.plot(
+            curve["amplitude"], curve[column], marker="o", label=label, **_MODEL_STYLE
+        )
+    _finish(top, "", "frequency [Hz]", "Backbone")
+    _finish(bottom, amplitude_label, "damping ratio", None)
+    top.figure.tight_layout()
+    return top.figure
+
+
+@_document_axes
+def plot_instantaneous_frequency(
+    track: Any,
+    *,
+    rest: float | None = None,
+    title: str | None = "First mode along the record",
+    ax: Axes | None = None,
+) -> Axes:
+    """The first mode's frequency along a record, by local linearisation.
+
+    Parameters
+    ----------
+    track : pandas.DataFrame
+        From :func:`~sysid_nn.instantaneous_frequency`: columns ``t`` and
+        ``frequency_hz``.
+    rest : float, optional
+        A frequency drawn as a dotted line for reference (e.g. the first
+        mode of :func:`~sysid_nn.modal_parameters`, at rest).
+    %(title_ax)s
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+        The axes drawn on.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> track = pd.DataFrame({"t": [0.0, 0.01, 0.02],
+    ...                       "frequency_hz": [1.0, 0.9, 0.95]})
+    >>> ax = plot_instantaneous_frequency(track, rest=1.0)
+    >>> len(ax.lines)
+    2
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close(ax.figure)
+    """
+    if not all(c in getattr(track, "columns", ()) for c in ("t", "frequency_hz")):
+        raise ValueError(
+            "track must be a DataFrame returned by sysid_nn.instantaneous_frequency, "
+            "with columns t and frequency_hz."
+        )
+    ax = _new_axes(ax)
+    ax.plot(
+        track["t"], track["frequency_hz"], label="local linearisation", **_MODEL_STYLE
+    )
+    if rest is not None:
+        ax.axhline(rest, label=f"at rest, {rest:.3g} Hz", **_BAND_STYLE)
+    return _finish(ax, "time [s]", "frequency [Hz]", title)

@@ -173,6 +173,9 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     np.testing.assert_allclose(series["t"], 0.01 * np.arange(len(y)))
     report = (out / "report.md").read_text()
     assert "## Results at a glance" in report and "`series.csv`" in report
+    # The modes of the model and its non-linearity verdict on these records.
+    assert "## The structure" in report and "| mode | frequency [Hz] |" in report
+    assert "Non-linearity test on these records: The network" in report
     # The user's own test, in the user's words: no paper's sections or symbols.
     own = report.replace("split by 'realization'", "")  # the user's column
     for paper in ("section 4.", "eq. 19", "N_s", "realisation", "realization"):

@@ -397,6 +397,9 @@ class _RecurrentRegressorBase(
         self.refined_restart_ = result.refined
         self.selected_ = result.selected
         lin = None if result.linear is None else result.linear.run
+        # The linear model in the network's own weights, for the
+        # non-linearity test (sysid_nn.nonlinearity_test).
+        self._linear_coefs = None if lin is None else result.linear.w.copy()
         self.linear_score_ = (
             None
             if lin is None

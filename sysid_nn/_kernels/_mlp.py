@@ -104,7 +104,7 @@ def mlp_forward(w, sizes, act, bypass, z, acts, out):
             out[k] += _dot(w, p + k * n_z, z, 0, n_z)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def mlp_vjp(w, sizes, act, bypass, z, acts, v, gw, gz, delta, delta_prev):
     """Vector-Jacobian product of the network at a stored forward pass.
 

@@ -114,7 +114,7 @@ def _step(
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _sensitivity_rows(
     w, sizes, act, bypass, Sc, z, acts, J, r0, lag_rows, n_fed, v, gz, gphi, d1, d2
 ):  # fmt: skip

@@ -1,7 +1,7 @@
 """The ``sysid-nn`` command: a thin shell over the public API.
 
 One sub-command per task, each in its own module (``_generate``,
-``_reproduce``, ``_fit``, ``_validate``) with an ``_add_<command>`` function
+``_reproduce``, ``_fit``, ``_validate``, ``_modal``) with an ``_add_<command>`` function
 that builds its parser and a ``_run_<command>(args) -> int`` function that
 runs it, so new commands plug in without touching the others; ``_records``
 reads the user's files and ``_common`` holds what every command shares::
@@ -11,6 +11,7 @@ reads the user's files and ``_common`` holds what every command shares::
     sysid-nn fit records.csv --input excitation --output displacement \\
         --split-by realization --save model.joblib
     sysid-nn validate --model model.joblib new_records.csv --out validation
+    sysid-nn modal model.joblib
 
 Every command that writes refuses to replace an existing output without
 ``--overwrite``, never writes over one of its own input files, checks that the
@@ -40,6 +41,7 @@ from sysid_nn.cli._common import (
 )
 from sysid_nn.cli._fit import _add_fit
 from sysid_nn.cli._generate import _add_generate
+from sysid_nn.cli._modal import _add_modal
 from sysid_nn.cli._reproduce import _add_reproduce
 from sysid_nn.cli._validate import _add_validate
 
@@ -51,6 +53,7 @@ _COMMANDS: tuple[Callable[[argparse._SubParsersAction], None], ...] = (
     _add_reproduce,
     _add_fit,
     _add_validate,
+    _add_modal,
 )
 
 

@@ -193,6 +193,15 @@ _ABOUT = {
         "and report.md in --out; the scores of every output are printed "
         "under its column name.",
     ),
+    "modal": (
+        "natural frequencies, damping ratios and mode shapes of a saved model",
+        "Print the modes of a model saved by `sysid-nn fit`, from its "
+        "linearisation at rest: natural frequency and damping ratio with "
+        "their intervals (propagated from the weights' covariance), and with "
+        "several outputs the mode shape under each output's column name. "
+        "Numerical modes (real poles, near Nyquist, unobservable) are left "
+        "out unless --all.",
+    ),
 }
 
 

@@ -39,6 +39,7 @@ from sysid_nn.study._report import (
     write_report,
 )
 from sysid_nn.study._scoring import evaluate, summarize
+from sysid_nn.study._structure import structure_lines
 
 
 @contextlib.contextmanager
@@ -393,6 +394,8 @@ def run_validation(
                 "measured response."
             )
         n = summary["n_realizations"].iloc[0]
+        X, y = model.arrays(records)
+        structure = structure_lines(model.estimator, X, y, float(dt))
         write_report(
             tmp / "report.md",
             summary,
@@ -413,9 +416,14 @@ def run_validation(
             max_lag=max_lag,
             paper_terms=False,
             files=files,
-            extra={"Warnings": [f"- {describe_non_finite(b)}" for b in non_finite]}
-            if non_finite
-            else None,
+            extra={
+                "The structure": structure,
+                **(
+                    {"Warnings": [f"- {describe_non_finite(b)}" for b in non_finite]}
+                    if non_finite
+                    else {}
+                ),
+            },
         )
     return Bunch(
         out_dir=Path(out_dir),
