@@ -58,6 +58,27 @@ def _check_dt(dt) -> float:
     return float(dt)
 
 
+def _check_arguments(estimator, dt, level) -> float:
+    """Check a readout's ``estimator``, ``dt`` and ``level``; return ``dt``."""
+    dt = _check_dt(dt)
+    if (
+        isinstance(level, bool)
+        or not isinstance(level, numbers.Real)
+        or not 0.0 < level < 1.0
+    ):
+        raise ValueError(
+            f"level must be a probability strictly between 0 and 1 (e.g. 0.95); "
+            f"got {level!r}."
+        )
+    if not hasattr(estimator, "_layout"):
+        raise TypeError(
+            f"estimator must be a fitted TDLRegressor or ISSMRegressor; got "
+            f"{type(estimator).__name__}."
+        )
+    check_is_fitted(estimator, "coefs_")
+    return dt
+
+
 # ------------------------------------------------------------- the network
 def _forward(w, layout, act: int, z: np.ndarray):
     """Output and input Jacobian ``d out / d z`` of the network at ``z``."""
@@ -168,6 +189,33 @@ def _start_guess(est, lin: _Linearisation) -> np.ndarray:
         else (np.asarray(rest) - est._y_mean) / est._y_scale
     )
     return y if lin.tdl else np.r_[y, np.zeros(lin.n - lin.p)]
+
+
+def _weight_derivatives(lin: _Linearisation, w, cov, rest, value) -> np.ndarray:
+    """``d value(A, jphi) / d w`` at rest, by central differences in the weights.
+
+    ``value`` maps the state matrix and the network's Jacobian of the
+    linearisation (the rest found again for each perturbed ``w``, Newton
+    starting from ``rest``) to an array; the result has one more, last axis,
+    one column per weight, zero for weights without variance in ``cov``.
+    """
+    out = None
+    for k in np.flatnonzero(np.diag(cov) > 0):
+        h = _STEP * max(1.0, abs(w[k]))
+        wp, wm = w.copy(), w.copy()
+        wp[k] += h
+        wm[k] -= h
+        diff = (
+            value(*lin.state_matrix(wp, rest)[:2])
+            - value(*lin.state_matrix(wm, rest)[:2])
+        ) / (2 * h)
+        if out is None:
+            out = np.zeros((*np.shape(diff), len(w)), dtype=np.result_type(diff))
+        out[..., k] = diff
+    if out is None:
+        base = np.asarray(value(*lin.state_matrix(w, rest)[:2]))
+        out = np.zeros((*base.shape, len(w)), dtype=base.dtype)
+    return out
 
 
 # ------------------------------------------------------------------- poles
@@ -293,18 +341,7 @@ def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
     >>> float(modes.damping_ratio[0].round(4)), modes.kind[0]
     (0.3313, 'structural')
     """
-    dt = _check_dt(dt)
-    if not isinstance(level, numbers.Real) or not 0.0 < level < 1.0:
-        raise ValueError(
-            f"level must be a probability strictly between 0 and 1 (e.g. 0.95); "
-            f"got {level!r}."
-        )
-    check_is_fitted(estimator, "coefs_")
-    if not hasattr(estimator, "_layout"):
-        raise TypeError(
-            f"estimator must be a fitted TDLRegressor or ISSMRegressor; got "
-            f"{type(estimator).__name__}."
-        )
+    dt = _check_arguments(estimator, dt, level)
     lin = _Linearisation(estimator)
     w = np.asarray(estimator.coefs_, dtype=np.float64)
     A, j, rest = lin.state_matrix(w, _start_guess(estimator, lin))
@@ -314,17 +351,11 @@ def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
     keep &= np.abs(lam) > 0  # a pole at zero is a pure delay
     lam_k, V_k, W_k = lam[keep], V[:, keep], Winv[keep]
     freq, zeta, s = _to_continuous(lam_k, dt)
-    # Derivative of each pole in each weight with a non-zero variance.
+    # First-order eigenvalue perturbation, linear in dA: u^H dA v.
     cov = np.asarray(estimator.coefs_covariance_)
-    live = np.flatnonzero(np.diag(cov) > 0)
-    dlam = np.zeros((len(lam_k), len(w)), dtype=complex)
-    for k in live:
-        h = _STEP * max(1.0, abs(w[k]))
-        wp, wm = w.copy(), w.copy()
-        wp[k] += h
-        wm[k] -= h
-        dA = (lin.state_matrix(wp, rest)[0] - lin.state_matrix(wm, rest)[0]) / (2 * h)
-        dlam[:, k] = np.einsum("ij,jk,ki->i", W_k, dA, V_k)
+    dlam = _weight_derivatives(
+        lin, w, cov, rest, lambda A, j: np.einsum("ij,jk,ki->i", W_k, A, V_k)
+    )
     df, dzeta = _gradients(dlam, lam_k, s, dt)
     z = norm.ppf(0.5 + 0.5 * level)
     with np.errstate(invalid="ignore"):
