@@ -192,3 +192,36 @@ def test_arguments_validated(model):
         frequency_response(model, DT, np.c_[X, X], y)
     with pytest.raises(TypeError, match="estimator must be"):
         frequency_response(object(), DT)
+
+
+def test_plot_draws_the_table(model):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from sysid_nn.plotting import plot_frequency_response
+
+    X, y = _records(1000, noise=0.1, seed=5)
+    frf = frequency_response(model, DT, X, y, nperseg=128)
+    fig = plot_frequency_response(frf)
+    top, bottom = fig.axes
+    h1, magnitude, low, high = top.lines
+    np.testing.assert_allclose(h1.get_ydata(), frf.h1_magnitude)
+    np.testing.assert_allclose(magnitude.get_ydata(), frf.magnitude)
+    np.testing.assert_allclose(low.get_ydata(), frf.magnitude_low)
+    np.testing.assert_allclose(high.get_ydata(), frf.magnitude_high)
+    np.testing.assert_allclose(bottom.lines[0].get_ydata(), frf.coherence)
+    assert top.get_yscale() == "log"
+    plt.close(fig)
+    # From the estimator, without data: the phase below.
+    fig = plot_frequency_response(model, DT)
+    np.testing.assert_allclose(
+        fig.axes[1].lines[0].get_ydata(),
+        frequency_response(model, DT).phase_deg,
+    )
+    plt.close(fig)
+    with pytest.raises(ValueError, match="dt must be given"):
+        plot_frequency_response(model)
+    with pytest.raises(ValueError, match="output=1, input=0 is not a pair"):
+        plot_frequency_response(frf, output=1)
