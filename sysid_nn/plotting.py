@@ -858,6 +858,7 @@ def plot_instantaneous_frequency(
     return _finish(ax, "time [s]", "frequency [Hz]", title)
 
 
+@_document_axes
 def plot_frequency_response(
     frf: Any,
     dt: float | None = None,
@@ -890,13 +891,12 @@ def plot_frequency_response(
         The output-input pair drawn.
     title : str
         Title of the top panel.
-    ax : pair of Axes, optional
-        Axes for the two panels; a new figure if None.
+    %(ax_pair)s
 
     Returns
     -------
     matplotlib.figure.Figure
-        The figure of the two panels.
+        The figure: the magnitude above, the coherence or phase below.
 
     Examples
     --------

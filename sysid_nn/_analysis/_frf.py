@@ -19,11 +19,13 @@ from scipy.stats import norm
 
 from sysid_nn._analysis._modal import (
     _check_arguments,
+    _document_readout,
     _Linearisation,
     _start_guess,
     _weight_derivatives,
 )
 from sysid_nn._records._sequences import as_sequence_list, check_paired
+from sysid_nn._records._validation import check_positive_int
 
 __all__ = ["frequency_response"]
 
@@ -37,11 +39,7 @@ def _response(lin: _Linearisation, A, j, z: np.ndarray, gain: np.ndarray):
 
 
 def _check_n_freq(n_freq) -> int:
-    if (
-        isinstance(n_freq, bool)
-        or not isinstance(n_freq, numbers.Integral)
-        or n_freq < 2
-    ):
+    if check_positive_int(n_freq, "n_freq") < 2:
         raise ValueError(
             f"n_freq must be an integer >= 2, the number of frequencies from 0 to "
             f"the Nyquist frequency; got {n_freq!r}."
@@ -105,6 +103,7 @@ def _welch(X, y, est, dt: float, nperseg):
     return freq, h1, coherence, nperseg
 
 
+@_document_readout
 def frequency_response(
     estimator,
     dt,
@@ -139,11 +138,7 @@ def frequency_response(
 
     Parameters
     ----------
-    estimator : TDLRegressor or ISSMRegressor
-        A fitted model.
-    dt : float
-        Sampling interval of the training records in seconds; the fitted
-        model does not know it.
+    %(estimator_dt)s
     X : array-like or list of array-like, optional
         Excitation records, of shape ``(n_samples, n_features_in_)`` each.
     y : array-like or list of array-like, optional

@@ -25,6 +25,7 @@ import pandas as pd
 from scipy.stats import norm
 from sklearn.utils.validation import check_is_fitted
 
+from sysid_nn._docstrings import fill_doc
 from sysid_nn._kernels._mlp import LOGISTIC
 from sysid_nn._records._data import _FREE_RUN
 
@@ -40,6 +41,13 @@ _UNSEEN = 1e-3
 _REAL_TOL = 1e-9
 #: Relative step of the central differences in the weights.
 _STEP = 1e-6
+
+# The parameters every readout of the linearisation at rest takes.
+_document_readout = fill_doc(
+    estimator_dt="estimator : TDLRegressor or ISSMRegressor\n    A fitted model.\n"
+    "dt : float\n    Sampling interval of the training records in seconds; the "
+    "fitted\n    model does not know it."
+)
 
 
 def _check_dt(dt) -> float:
@@ -262,6 +270,7 @@ def _shape(v: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return (phi / phi[k]).real
 
 
+@_document_readout
 def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
     """Natural frequencies, damping ratios and mode shapes of a fitted model.
 
@@ -289,11 +298,7 @@ def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
 
     Parameters
     ----------
-    estimator : TDLRegressor or ISSMRegressor
-        A fitted model.
-    dt : float
-        Sampling interval of the training records in seconds; the fitted
-        model does not know it.
+    %(estimator_dt)s
     level : float, default=0.95
         Probability of the two-sided Gaussian intervals.
 
