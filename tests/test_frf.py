@@ -126,6 +126,13 @@ def test_h1_and_coherence_are_welch_estimates(model):
     # changes nothing.
     twice = frequency_response(model, DT, [X, X], [y, y], nperseg=256)
     np.testing.assert_allclose(twice.h1, frf.h1, rtol=1e-12)
+    # Records of different lengths count by their lengths.
+    short = slice(0, 1000)
+    both = frequency_response(model, DT, [X[short], X], [y[short], y], nperseg=256)
+    _, puy_short = csd(X[short, 0], y[short], fs=1 / DT, nperseg=256)
+    _, puu_short = welch(X[short, 0], fs=1 / DT, nperseg=256)
+    expected = (puy_short + 3 * puy) / (puu_short + 3 * puu)
+    np.testing.assert_allclose(both.h1, expected, rtol=1e-10)
 
 
 def test_band_positive_and_shrinks_with_more_data():
@@ -137,6 +144,11 @@ def test_band_positive_and_shrinks_with_more_data():
         assert (width > 0).all()
         assert (frf.magnitude_low <= frf.magnitude).all()
         assert (frf.magnitude <= frf.magnitude_high).all()
+        # Symmetric about the magnitude where it stays above zero.
+        np.testing.assert_allclose(
+            (frf.magnitude - frf.magnitude_low)[frf.magnitude_low > 0],
+            (width / 2)[frf.magnitude_low > 0],
+        )
         widths.append(width.mean())
     # The standard error goes as 1 / sqrt(n): about half with 8 times the data.
     assert widths[1] < 0.6 * widths[0]

@@ -132,7 +132,8 @@ def frequency_response(
 
     Given records ``X`` and ``y``, the data's FRF is estimated beside it:
     Welch's H1, ``S_yu S_uu^-1`` (Hann windows of ``nperseg`` samples, half
-    overlapping, the spectra averaged over the segments of all records),
+    overlapping, the spectra of the records averaged with their lengths as
+    weights),
     with the ordinary coherence ``|S_yu|^2 / (S_uu S_yy)`` of each
     output-input pair. The model's FRF is then evaluated on Welch's grid.
 
