@@ -37,6 +37,7 @@ __all__ = [
     "plot_band",
     "plot_cross_correlation",
     "plot_error_statistics",
+    "plot_frequency_response",
     "plot_hysteresis",
     "plot_instantaneous_frequency",
     "plot_order_selection",
@@ -855,3 +856,104 @@ def plot_instantaneous_frequency(
     if rest is not None:
         ax.axhline(rest, label=f"at rest, {rest:.3g} Hz", **_BAND_STYLE)
     return _finish(ax, "time [s]", "frequency [Hz]", title)
+
+
+@_document_axes
+def plot_frequency_response(
+    frf: Any,
+    dt: float | None = None,
+    X: Any = None,
+    y: Any = None,
+    *,
+    output: int = 0,
+    input: int = 0,
+    title: str | None = "Frequency response",
+    ax: Sequence[Axes] | None = None,
+) -> Figure:
+    """A model's frequency response at small amplitude, and the data's.
+
+    Top: the magnitude of the model's frequency response function (log
+    scale) with its confidence band dotted, and, when the table has it, the
+    data's H1 estimate beneath in grey; bottom: the coherence of the data
+    or, without data, the model's phase.
+
+    Parameters
+    ----------
+    frf : pandas.DataFrame or estimator
+        From :func:`~sysid_nn.frequency_response`; or a fitted
+        TDLRegressor or ISSMRegressor, whose table is computed with ``dt``,
+        ``X`` and ``y``.
+    dt : float, optional
+        Sampling interval in seconds, needed with an estimator.
+    X, y : array-like or list of array-like, optional
+        Records for the H1 estimate, with an estimator.
+    output, input : int, default=0
+        The output-input pair drawn.
+    title : str
+        Title of the top panel.
+    %(ax_pair)s
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure: the magnitude above, the coherence or phase below.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from scipy.signal import lfilter
+    >>> from sysid_nn import TDLRegressor
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal((500, 1))
+    >>> y = lfilter([0.0, 1.0], [1.0, -1.6, 0.81], u[:, 0])
+    >>> model = TDLRegressor(output_lags=2, input_lags=1, hidden_layer_sizes=(),
+    ...                      n_init=1, random_state=0).fit(u, y)
+    >>> fig = plot_frequency_response(model, 0.01, u, y)
+    >>> top, bottom = fig.axes
+    >>> len(top.lines), top.get_yscale(), bottom.get_ylabel()
+    (4, 'log', 'coherence')
+    >>> import matplotlib.pyplot as plt
+    >>> plt.close(fig)
+    """
+    if not hasattr(frf, "columns"):
+        from sysid_nn._analysis._frf import frequency_response
+
+        if dt is None:
+            raise ValueError(
+                "dt must be given with an estimator (the sampling interval in "
+                "seconds); or pass the table of sysid_nn.frequency_response."
+            )
+        frf = frequency_response(frf, dt, X, y)
+    columns = ("frequency_hz", "output", "input", "magnitude", "magnitude_low")
+    if not all(c in frf.columns for c in columns):
+        raise ValueError(
+            "frf must be a DataFrame returned by sysid_nn.frequency_response, "
+            f"with columns {', '.join(columns)}."
+        )
+    rows = frf[(frf["output"] == output) & (frf["input"] == input)]
+    if not len(rows):
+        raise ValueError(
+            f"output={output!r}, input={input!r} is not a pair of the table; its "
+            f"outputs are 0 to {frf['output'].max()} and inputs 0 to "
+            f"{frf['input'].max()}."
+        )
+    top, bottom = _new_panels(ax, 2, figsize=(6.4, 6.4), sharex=True)
+    f = rows["frequency_hz"]
+    data = "h1_magnitude" in rows.columns
+    if data:
+        top.plot(f, rows["h1_magnitude"], label="data (H1)", **_REFERENCE_STYLE)
+    top.plot(f, rows["magnitude"], label="model at rest", **_MODEL_STYLE)
+    level = frf.attrs.get("level", 0.95)
+    top.plot(f, rows["magnitude_low"], label=f"{100 * level:g}% band", **_BAND_STYLE)
+    top.plot(f, rows["magnitude_high"], **_BAND_STYLE)
+    top.set_yscale("log")
+    _finish(top, "", "magnitude", title)
+    if data:
+        bottom.plot(f, rows["coherence"], label="data", **_MODEL_STYLE)
+        bottom.set_ylim(0.0, 1.05)
+        _finish(bottom, "frequency [Hz]", "coherence", None)
+    else:
+        bottom.plot(f, rows["phase_deg"], label="model at rest", **_MODEL_STYLE)
+        _finish(bottom, "frequency [Hz]", "phase [deg]", None)
+    top.figure.tight_layout()
+    return top.figure

@@ -25,6 +25,7 @@ import pandas as pd
 from scipy.stats import norm
 from sklearn.utils.validation import check_is_fitted
 
+from sysid_nn._docstrings import fill_doc
 from sysid_nn._kernels._mlp import LOGISTIC
 from sysid_nn._records._data import _FREE_RUN
 
@@ -41,6 +42,13 @@ _REAL_TOL = 1e-9
 #: Relative step of the central differences in the weights.
 _STEP = 1e-6
 
+# The parameters every readout of the linearisation at rest takes.
+_document_readout = fill_doc(
+    estimator_dt="estimator : TDLRegressor or ISSMRegressor\n    A fitted model.\n"
+    "dt : float\n    Sampling interval of the training records in seconds; the "
+    "fitted\n    model does not know it."
+)
+
 
 def _check_dt(dt) -> float:
     """``dt`` as a positive finite float, or an error naming it."""
@@ -56,6 +64,27 @@ def _check_dt(dt) -> float:
             f"{dt!r}. The fitted model does not know its sampling interval."
         )
     return float(dt)
+
+
+def _check_arguments(estimator, dt, level) -> float:
+    """Check a readout's ``estimator``, ``dt`` and ``level``; return ``dt``."""
+    dt = _check_dt(dt)
+    if (
+        isinstance(level, bool)
+        or not isinstance(level, numbers.Real)
+        or not 0.0 < level < 1.0
+    ):
+        raise ValueError(
+            f"level must be a probability strictly between 0 and 1 (e.g. 0.95); "
+            f"got {level!r}."
+        )
+    if not hasattr(estimator, "_layout"):
+        raise TypeError(
+            f"estimator must be a fitted TDLRegressor or ISSMRegressor; got "
+            f"{type(estimator).__name__}."
+        )
+    check_is_fitted(estimator, "coefs_")
+    return dt
 
 
 # ------------------------------------------------------------- the network
@@ -170,6 +199,33 @@ def _start_guess(est, lin: _Linearisation) -> np.ndarray:
     return y if lin.tdl else np.r_[y, np.zeros(lin.n - lin.p)]
 
 
+def _weight_derivatives(lin: _Linearisation, w, cov, rest, value) -> np.ndarray:
+    """``d value(A, jphi) / d w`` at rest, by central differences in the weights.
+
+    ``value`` maps the state matrix and the network's Jacobian of the
+    linearisation (the rest found again for each perturbed ``w``, Newton
+    starting from ``rest``) to an array; the result has one more, last axis,
+    one column per weight, zero for weights without variance in ``cov``.
+    """
+    out = None
+    for k in np.flatnonzero(np.diag(cov) > 0):
+        h = _STEP * max(1.0, abs(w[k]))
+        wp, wm = w.copy(), w.copy()
+        wp[k] += h
+        wm[k] -= h
+        diff = (
+            value(*lin.state_matrix(wp, rest)[:2])
+            - value(*lin.state_matrix(wm, rest)[:2])
+        ) / (2 * h)
+        if out is None:
+            out = np.zeros((*np.shape(diff), len(w)), dtype=np.result_type(diff))
+        out[..., k] = diff
+    if out is None:
+        base = np.asarray(value(*lin.state_matrix(w, rest)[:2]))
+        out = np.zeros((*base.shape, len(w)), dtype=base.dtype)
+    return out
+
+
 # ------------------------------------------------------------------- poles
 def _to_continuous(lam, dt):
     """``(frequency_hz, damping_ratio, s)`` of discrete poles ``lam``."""
@@ -214,6 +270,7 @@ def _shape(v: np.ndarray, scale: np.ndarray) -> np.ndarray:
     return (phi / phi[k]).real
 
 
+@_document_readout
 def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
     """Natural frequencies, damping ratios and mode shapes of a fitted model.
 
@@ -241,11 +298,7 @@ def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
 
     Parameters
     ----------
-    estimator : TDLRegressor or ISSMRegressor
-        A fitted model.
-    dt : float
-        Sampling interval of the training records in seconds; the fitted
-        model does not know it.
+    %(estimator_dt)s
     level : float, default=0.95
         Probability of the two-sided Gaussian intervals.
 
@@ -293,18 +346,7 @@ def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
     >>> float(modes.damping_ratio[0].round(4)), modes.kind[0]
     (0.3313, 'structural')
     """
-    dt = _check_dt(dt)
-    if not isinstance(level, numbers.Real) or not 0.0 < level < 1.0:
-        raise ValueError(
-            f"level must be a probability strictly between 0 and 1 (e.g. 0.95); "
-            f"got {level!r}."
-        )
-    check_is_fitted(estimator, "coefs_")
-    if not hasattr(estimator, "_layout"):
-        raise TypeError(
-            f"estimator must be a fitted TDLRegressor or ISSMRegressor; got "
-            f"{type(estimator).__name__}."
-        )
+    dt = _check_arguments(estimator, dt, level)
     lin = _Linearisation(estimator)
     w = np.asarray(estimator.coefs_, dtype=np.float64)
     A, j, rest = lin.state_matrix(w, _start_guess(estimator, lin))
@@ -314,17 +356,11 @@ def modal_parameters(estimator, dt, *, level: float = 0.95) -> pd.DataFrame:
     keep &= np.abs(lam) > 0  # a pole at zero is a pure delay
     lam_k, V_k, W_k = lam[keep], V[:, keep], Winv[keep]
     freq, zeta, s = _to_continuous(lam_k, dt)
-    # Derivative of each pole in each weight with a non-zero variance.
+    # First-order eigenvalue perturbation, linear in dA: u^H dA v.
     cov = np.asarray(estimator.coefs_covariance_)
-    live = np.flatnonzero(np.diag(cov) > 0)
-    dlam = np.zeros((len(lam_k), len(w)), dtype=complex)
-    for k in live:
-        h = _STEP * max(1.0, abs(w[k]))
-        wp, wm = w.copy(), w.copy()
-        wp[k] += h
-        wm[k] -= h
-        dA = (lin.state_matrix(wp, rest)[0] - lin.state_matrix(wm, rest)[0]) / (2 * h)
-        dlam[:, k] = np.einsum("ij,jk,ki->i", W_k, dA, V_k)
+    dlam = _weight_derivatives(
+        lin, w, cov, rest, lambda A, j: np.einsum("ij,jk,ki->i", W_k, A, V_k)
+    )
     df, dzeta = _gradients(dlam, lam_k, s, dt)
     z = norm.ppf(0.5 + 0.5 * level)
     with np.errstate(invalid="ignore"):
