@@ -95,6 +95,36 @@ MUTATIONS = (
         (f"{POLICY}::test_without_a_linear_candidate_the_best_restart_is_kept",),
     ),
     Mutation(
+        "unit margin",
+        "sysid_nn/_engine/_subspace.py",
+        "np.abs(np.linalg.eigvals(A)).max() < 1.0 - UNIT_MARGIN",
+        "np.abs(np.linalg.eigvals(A)).max() < 1.0",
+        (
+            "tests/test_least_squares.py"
+            "::test_a_pole_within_the_margin_of_the_unit_circle_is_not_stable",
+        ),
+    ),
+    Mutation(
+        "block states",
+        "sysid_nn/_engine/_subspace.py",
+        "states[k] = out[-1, p:]",
+        "pass",
+        (
+            "tests/test_least_squares.py"
+            "::test_output_error_blocks_carry_the_states_across_blocks",
+        ),
+    ),
+    Mutation(
+        "block cutoff",
+        "sysid_nn/_engine/_least_squares.py",
+        "rcond=cutoff(n_rows, k)",
+        "rcond=None",
+        (
+            "tests/test_least_squares.py"
+            "::test_rank_deficient_designs_get_the_minimum_norm_solution",
+        ),
+    ),
+    Mutation(
         "run-in without rest",
         "sysid_nn/_estimators/_base.py",
         "lead = _RUN_IN if rest is not None else 0",
