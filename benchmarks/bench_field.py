@@ -80,11 +80,11 @@ BENCHMARKS = {
 
 #: Model name -> (label, factory). The defaults, and the linear model.
 MODELS = {
-    "tdl": ("TDLRegressor()", lambda: TDLRegressor(random_state=SEED)),
-    "issm": ("ISSMRegressor()", lambda: ISSMRegressor(random_state=SEED)),
+    "tdl": ("TDLRegressor()", lambda seed=SEED: TDLRegressor(random_state=seed)),
+    "issm": ("ISSMRegressor()", lambda seed=SEED: ISSMRegressor(random_state=seed)),
     "linear": (
         "TDLRegressor(hidden_layer_sizes=())",
-        lambda: TDLRegressor(hidden_layer_sizes=(), random_state=SEED),
+        lambda seed=SEED: TDLRegressor(hidden_layer_sizes=(), random_state=seed),
     ),
 }
 
@@ -133,29 +133,38 @@ def _simulate(model, X, name: str, benchmark: str, n_period: int, y_init=None):
     return model.simulate(X)
 
 
-def _fit(model, data, validation: str):
+def _fit(model, data, validation: str, shift: int = 0):
     """Fit on the training record; ``"split"`` validates on its last fifth alone.
 
     ``"tail"`` is the estimators' default for one record: the last fifth is
     held out as a validation record of its own (judged as one passed as
-    ``X_val``, so both give the same fit). ``"split"`` passes it as ``X_val``.
+    ``X_val``, so both give the same fit). ``"split"`` passes it as ``X_val``,
+    its start moved by ``shift`` samples.
     """
     if validation == "tail":
         return model.fit(data.X_train, data.y_train)
     X, y = data.X_train[0], data.y_train[0]
-    n = round(0.8 * len(y))
+    n = round(0.8 * len(y)) + shift
     return model.fit(X[:n], y[:n], X_val=X[n:], y_val=y[n:])
 
 
-def run_one(benchmark: str, model_name: str, data, validation="tail") -> list[dict]:
+def run_one(
+    benchmark: str,
+    model_name: str,
+    data,
+    validation="tail",
+    *,
+    random_state: int = SEED,
+    shift: int = 0,
+) -> list[dict]:
     """Fit one model on one benchmark and score it on every test record."""
     _, unit, scale = BENCHMARKS[benchmark]
     label, factory = MODELS[model_name]
-    model = factory()
+    model = factory(random_state)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)
         start, cpu = time.perf_counter(), time.process_time()
-        _fit(model, data, validation)
+        _fit(model, data, validation, shift)
         fit_s = time.perf_counter() - start
         cpu_s = time.process_time() - cpu
     load = os.getloadavg()[0]

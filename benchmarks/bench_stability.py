@@ -1,0 +1,201 @@
+"""The same answer under perturbations a user does not see: seeds and splits.
+
+Fits the default models of :mod:`bench_field` on the community's benchmarks
+once per ``random_state`` and per validation split, and reports for every
+test record the median test RMSE (free run from rest, after the benchmark's
+initialisation window), its range, the spread (largest over smallest) and how
+the worst fit compares with the median linear model. The validation splits:
+
+* ``tail``: the estimators' default on one record, the last fifth held out;
+* ``split+k``: the last fifth, its start moved ``k`` samples later, passed as
+  ``X_val`` (``split+0`` gives the same fit as ``tail``, so it is not run).
+
+Rows go to ``results_stability.csv`` (one per fit and test record, replaced
+per benchmark, model, split and seed) and the summary to
+``results_stability.md``::
+
+    python benchmarks/bench_stability.py --only cascaded_tanks,emps
+    python benchmarks/bench_stability.py --only silverbox --seeds 0,1,2,3,4 \\
+        --shifts 0 --models issm,linear
+    python benchmarks/bench_stability.py --report
+
+A figure quoted from this file is a median over seeds with its range, not
+one draw.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import platform
+import subprocess
+from pathlib import Path
+
+import numpy as np
+from _results import read_rows
+from bench_field import BENCHMARKS, MODELS, run_one
+
+HERE = Path(__file__).resolve().parent
+CSV = HERE / "results_stability.csv"
+FIELDS = [
+    "benchmark", "model", "split", "random_state", "test", "unit", "rmse",
+    "cpu_s", "load", "warnings", "tree",
+]  # fmt: skip
+
+
+def _tree() -> str:
+    """The commit the fits ran on (with ``+`` if the checkout had changes)."""
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            capture_output=True, text=True, cwd=HERE, check=True,
+        ).stdout.strip()  # fmt: skip
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True, text=True, cwd=HERE, check=True,
+        ).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.CalledProcessError):
+        return "?"
+    return head + ("+" if dirty else "")
+
+
+def _key(row: dict) -> tuple:
+    return (row["benchmark"], row["model"], row["split"], str(row["random_state"]))
+
+
+def _store(path: Path, rows: list[dict]) -> list[dict]:
+    """Replace the stored rows of the same fits; keep the others."""
+    new = {_key(r) for r in rows}
+    merged = [r for r in read_rows(path) if _key(r) not in new] + rows
+    order = list(BENCHMARKS)
+    merged.sort(
+        key=lambda r: (
+            order.index(r["benchmark"]),
+            r["test"],
+            list(MODELS).index(r["model"]),
+            r["split"],
+            int(r["random_state"]),
+        )
+    )
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=FIELDS)
+        writer.writeheader()
+        writer.writerows(merged)
+    return merged
+
+
+def summarise(rows: list[dict]) -> list[str]:
+    """One Markdown line per benchmark, test record and model."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["benchmark"], r["test"], r["model"]), []).append(r)
+    lines = [
+        "| benchmark | test | model | fits | median | range | spread | "
+        "worst / linear median | median CPU-s | trees |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for (benchmark, test, model), group in groups.items():
+        rmse = np.array([float(r["rmse"]) for r in group])
+        linear = [
+            float(r["rmse"])
+            for r in rows
+            if (r["benchmark"], r["test"], r["model"]) == (benchmark, test, "linear")
+        ]
+        ratio = f"{rmse.max() / np.median(linear):.2f}" if linear else ""
+        cpu = np.median([float(r["cpu_s"]) for r in group])
+        splits = sorted({r["split"] for r in group})
+        trees = ", ".join(sorted({r.get("tree", "?") for r in group}))
+        finite = np.isfinite(rmse).all()
+        spread = f"{rmse.max() / rmse.min():.2f}" if finite else "diverged"
+        lines.append(
+            f"| {benchmark} | {test} | {MODELS[model][0]} | {len(group)} "
+            f"({len(splits)} splits) | {np.median(rmse):.4g} {group[0]['unit']} | "
+            f"{rmse.min():.4g} - {rmse.max():.4g} | {spread} | {ratio} | "
+            f"{cpu:.1f} | {trees} |"
+        )
+    return lines
+
+
+def write_report(path: Path, rows: list[dict]) -> str:
+    splits = sorted({r["split"] for r in rows})
+    seeds = sorted({int(r["random_state"]) for r in rows})
+    loads = [float(r["load"]) for r in rows if r.get("load")]
+    text = "\n".join(
+        [
+            "# The same answer under seeds and validation splits",
+            "",
+            "Test RMSE of the free run from rest after the initialisation window, "
+            f"over `random_state` in {seeds} and the validation splits {splits} "
+            "(`tail`: the estimators' default, the last fifth of the training "
+            "record held out; `split+k`: the last fifth moved `k` samples later, "
+            "passed as `X_val`). Spread: largest over smallest test RMSE of a "
+            "model's fits. Worst / linear median: its worst fit over the median "
+            "of the linear model's. CPU time of one fit on one core "
+            f"({platform.machine()}, {os.cpu_count()} cores shared with other "
+            f"jobs, 1-minute load {min(loads, default=0):.1f}-"
+            f"{max(loads, default=0):.1f}). Written by "
+            "`benchmarks/bench_stability.py`.",
+            "",
+            *summarise(rows),
+            "",
+        ]
+    )
+    path.with_suffix(".md").write_text(text)
+    return text
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--only", default="cascaded_tanks,emps,silverbox")
+    parser.add_argument("--models", default=",".join(MODELS))
+    parser.add_argument("--seeds", default="0,1,2,3,4")
+    parser.add_argument(
+        "--shifts",
+        default="0,25",
+        help="validation starts, in samples after four fifths (0: the default tail)",
+    )
+    parser.add_argument("--data-home", default=None, help="data directory")
+    parser.add_argument("--out", default=str(CSV), help="results CSV")
+    parser.add_argument("--report", action="store_true", help="only summarise")
+    args = parser.parse_args(argv)
+    out = Path(args.out)
+    benchmarks = [b for b in args.only.split(",") if b]
+    models = [m for m in args.models.split(",") if m]
+    unknown = set(benchmarks) - set(BENCHMARKS) | set(models) - set(MODELS)
+    if unknown:
+        parser.error(f"unknown benchmark or model: {', '.join(sorted(unknown))}")
+    if not args.report:
+        tree = _tree()
+        seeds = [int(s) for s in args.seeds.split(",")]
+        shifts = [int(s) for s in args.shifts.split(",")]
+        for benchmark in benchmarks:
+            data = BENCHMARKS[benchmark][0](data_home=args.data_home)
+            for shift in shifts:
+                split = "tail" if shift == 0 else f"split{shift:+d}"
+                validation = "tail" if shift == 0 else "split"
+                for model in models:
+                    for seed in seeds:
+                        fitted = run_one(
+                            benchmark,
+                            model,
+                            data,
+                            validation,
+                            random_state=seed,
+                            shift=shift,
+                        )
+                        rows = [
+                            {
+                                **{k: r[k] for k in FIELDS if k in r},
+                                "split": split,
+                                "random_state": seed,
+                                "tree": tree,
+                            }
+                            for r in fitted
+                        ]
+                        _store(out, rows)
+    print(write_report(out, read_rows(out)))
+
+
+if __name__ == "__main__":
+    main()
