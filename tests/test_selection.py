@@ -287,7 +287,7 @@ def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
         _run(bad, 0.0, 0.5),
         _run(good, 0.0, 1.0),
     ]
-    chosen, selected, bounded = choose(model, train, None, runs, None)
+    chosen, selected, bounded, _ = choose(model, train, None, runs, None)
     assert chosen.w is good
     assert selected == "restart"
     assert bounded == [False, True]
@@ -309,16 +309,16 @@ def test_restart_that_fits_its_training_records_worse_than_linear_is_not_chosen(
     lucky = _run(w.copy(), 0.30, 0.10)
     sound = _run(w.copy(), 0.05, 0.15)
     linear = LinearCandidate(run=_run(w.copy(), 0.20, 0.20), w=w.copy())
-    chosen, selected, _ = choose(model, train, train, [lucky, sound], linear)
+    chosen, selected, *_ = choose(model, train, train, [lucky, sound], linear)
     assert chosen is sound
     assert selected == "restart"
     # Without validation records the score is the training loss itself.
-    chosen, _, _ = choose(model, train, None, [lucky, sound], linear)
+    chosen, *_ = choose(model, train, None, [lucky, sound], linear)
     assert chosen is lucky
     # No restart fits better than the linear model: it is returned, and the
     # warning says why.
     with pytest.warns(UserWarning, match="1 of 1 fitted the training records worse"):
-        chosen, selected, _ = choose(model, train, train, [lucky], linear)
+        chosen, selected, *_ = choose(model, train, train, [lucky], linear)
     assert selected == "linear"
     assert chosen.w is linear.w
 

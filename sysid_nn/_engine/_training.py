@@ -223,6 +223,9 @@ class Training:
     #: Per run, whether its free run stays bounded at twice the training
     #: amplitude (see :func:`sysid_nn._engine._selection.bounded_beyond_range`).
     bounded: list = field(default_factory=list)
+    #: Per run, its constant-input excursion over its bound (see
+    #: :func:`sysid_nn._engine._selection.excursion_ratios`).
+    excursions: np.ndarray | None = None
     #: The index of the run that refined the linear model (None without one;
     #: see :func:`refine_linear`).
     refined: int | None = None
@@ -271,7 +274,9 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     if linear is not None:
         refined = len(runs)
         runs.append(refine_linear(est, train_data, val, linear, refined, refine_seed))
-    best, chosen, selected, bounded = choose_restart(est, train_data, val, runs, linear)
+    best, chosen, selected, bounded, excursions = choose_restart(
+        est, train_data, val, runs, linear
+    )
     if not np.all(np.isfinite(chosen.w)):
         raise ValueError(
             "The solver produced non-finite weights. Check the data for "
@@ -290,6 +295,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         linear=linear,
         chosen_run=chosen,
         bounded=bounded,
+        excursions=excursions,
         refined=refined,
         validation=val,
     )
@@ -326,7 +332,8 @@ def refine_linear(est, train_data, val, linear, k: int, seed: int) -> _Run:
 
 def choose_restart(est, train_data, val, runs: list, linear):
     """The run whose weights ``fit`` returns: ``(index, run, selected,
-    bounded)``, ``bounded`` whether each run's free run stays bounded.
+    bounded, excursions)``, ``bounded`` whether each run's free run stays
+    bounded, ``excursions`` its constant-input excursion over its bound.
 
     Among the restarts whose free run stays bounded beyond the training
     range, the one with the lowest criterion (the validation loss of its
@@ -335,9 +342,11 @@ def choose_restart(est, train_data, val, runs: list, linear):
     it beats the linear model; else the linear model (``index`` None,
     ``selected`` ``"linear"``). See :func:`sysid_nn._engine._selection.choose`.
     """
-    chosen, selected, bounded = _selection.choose(est, train_data, val, runs, linear)
+    chosen, selected, bounded, excursions = _selection.choose(
+        est, train_data, val, runs, linear
+    )
     index = next((k for k, r in enumerate(runs) if r is chosen), None)
-    return index, chosen, selected, bounded
+    return index, chosen, selected, bounded, excursions
 
 
 def fallback(est, w: np.ndarray, train_data: _Data, val: _Data | None):

@@ -392,6 +392,7 @@ class _RecurrentRegressorBase(
         self.restart_scores_ = np.array([-r.criterion for r in result.runs])
         self.restart_losses_ = np.array([r.loss for r in result.runs])
         self.restart_bounded_ = np.array(result.bounded, dtype=bool)
+        self.restart_excursions_ = np.asarray(result.excursions, dtype=float)
         self.n_restarts_ = len(result.runs)
         self.best_restart_ = result.chosen
         self.refined_restart_ = result.refined

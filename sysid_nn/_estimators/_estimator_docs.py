@@ -87,8 +87,18 @@ restart_losses_ : ndarray
     candidate only where this is no worse than ``linear_loss_``.
 restart_bounded_ : ndarray of bool
     Whether each restart's free run stays bounded when the training
-    excitation is scaled to twice its amplitude about its mean; the
-    unbounded ones are candidates only where none is bounded.
+    excitation is scaled to twice its amplitude about its mean, and
+    settles near the training outputs under constant inputs within the
+    training range (``restart_excursions_`` at most 1); the others are
+    candidates only where none passes.
+restart_excursions_ : ndarray
+    Each restart's largest output, standardised, of its free runs from
+    rest under constant inputs at the minimum, quartiles and maximum of
+    the training excitation, over four times the larger of the training
+    outputs' largest standardised value and the linear model's output
+    under the same input (``inf``: the run diverged; a level at which the
+    linear model itself runs away, as an integrating plant's does under a
+    constant force, bounds nothing).
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
 best_restart_ : int or None
