@@ -131,6 +131,23 @@ MUTATIONS = (
         "lead = _RUN_IN",
         (f"{POLICY}::test_a_model_without_rest_starts_from_zero_without_run_in",),
     ),
+    Mutation(
+        "short-record order always",
+        "sysid_nn/_engine/_order.py",
+        "kept = scores[1] <= (1.0 + ORDER_TOLERANCE) * scores[0] + ORDER_FLOOR",
+        "kept = True",
+        (
+            "tests/test_order.py::"
+            "test_short_record_order_that_misses_the_dynamics_loses_to_the_evidence",
+        ),
+    ),
+    Mutation(
+        "short-record order never",
+        "sysid_nn/_engine/_order.py",
+        "kept = scores[1] <= (1.0 + ORDER_TOLERANCE) * scores[0] + ORDER_FLOOR",
+        "kept = False",
+        ("tests/test_order.py::test_short_records_lower_the_order",),
+    ),
 )
 
 

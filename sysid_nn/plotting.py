@@ -657,7 +657,9 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
     scale), with the order after their largest gap marked. Bottom: the
     validation free-run NRMSE of the linear model of every candidate order,
     the tolerance band above the best, and the chosen linear order and
-    number of states marked.
+    number of states marked, and, where the short-record rule offered a
+    lower order, that order and which of the two validation kept
+    (``order_selection_.reason``).
 
     Parameters
     ----------
@@ -730,6 +732,18 @@ def plot_order_selection(estimator: Any, *, ax: Sequence[Axes] | None = None) ->
         linestyle="--",
         label=f"n_states {selection.n_states}",
     )
+    lowered = selection.get("short_record_states")
+    if lowered is not None:
+        # The short-record rule's order, and whether validation kept it.
+        kept = lowered == selection.n_states
+        bottom.axvline(
+            lowered,
+            color="C3",
+            linestyle=":",
+            label=f"short-record order {lowered} ("
+            + ("kept" if kept else f"evidence's {selection.evidence_states} kept")
+            + ")",
+        )
     _finish(bottom, "order", "validation NRMSE", "Free run of the linear models")
     top.figure.tight_layout()
     return top.figure

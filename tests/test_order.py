@@ -26,7 +26,11 @@ from sysid_nn._engine._order import (
 from sysid_nn.plotting import plot_order_selection
 
 # Short training budgets: the order, not the fit, is under test.
-pytestmark = pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+pytestmark = [
+    pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning"),
+    # The short-record rule's warning is under test in its own tests.
+    pytest.mark.filterwarnings("ignore:.*lowered the order the records show"),
+]
 
 #: Two resonances in cascade: a system of order 4.
 A1, A2 = [1.0, -1.6, 0.9], [1.0, -1.2, 0.75]
@@ -106,18 +110,60 @@ def test_unexplained_records_take_the_singular_value_gap():
 
 
 def test_short_records_lower_the_order():
+    # The lowered order still holds the system's four: its linear model
+    # validates as well, so it is kept, and the user is told.
     X, y = _fourth_order(5000, 0)
     long = _linear_issm().fit(X, y, X_val=X[:1000], y_val=y[:1000])
-    short = _linear_issm().fit(X[:2000], y[:2000], X_val=X[:1000], y_val=y[:1000])
+    with pytest.warns(UserWarning, match="lowered the order the records show"):
+        short = _linear_issm().fit(X[:2000], y[:2000], X_val=X[:1000], y_val=y[:1000])
     assert (
         long.order_selection_.linear_order == short.order_selection_.linear_order == 4
     )
     assert long.n_states_ == 8
+    assert long.order_selection_.short_record_states is None
     # At most one weight per ten samples for the auto-sized network.
+    sel = short.order_selection_
     n = short.n_states_
-    assert 3 <= n < 8
+    assert 4 <= n < 8
+    assert sel.evidence_states == 8 and sel.short_record_states == n
     assert SAMPLES_PER_WEIGHT * _n_weights(short, n) <= 2000
     assert SAMPLES_PER_WEIGHT * _n_weights(short, n + 1) > 2000
+    evidence, lowered = sel.short_record_scores
+    assert lowered <= (1 + ORDER_TOLERANCE) * evidence + ORDER_FLOOR
+    assert "validate within" in sel.reason
+
+
+def _sixth_order(n, seed, noise=0.01):
+    """Records of three lightly damped resonances in cascade (order 6)."""
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal(n)
+    a = np.convolve(np.convolve(A1, A2), [1.0, -0.4, 0.85])
+    y = lfilter([0.0, 0.2, 0.1], a, u)
+    return u[:, None], y + noise * y.std() * rng.standard_normal(n)
+
+
+def test_short_record_order_that_misses_the_dynamics_loses_to_the_evidence():
+    # 1500 samples allow the auto-sized network 4 states, the system has 6:
+    # the linear model of 4 states validates far worse, so the evidence's
+    # order is kept, without a warning.
+    X, y = _sixth_order(1500, 0)
+    Xv, yv = _sixth_order(1000, 1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        warnings.filterwarnings("ignore", "The training outputs", UserWarning)
+        warnings.filterwarnings("ignore", "A linear one-step model", UserWarning)
+        model = _linear_issm().fit(X, y, X_val=Xv, y_val=yv)
+    sel = model.order_selection_
+    assert sel.linear_order == 6
+    assert sel.short_record_states is not None
+    assert sel.short_record_states < 6 < sel.evidence_states == model.n_states_
+    evidence, lowered = sel.short_record_scores
+    assert lowered > (1 + ORDER_TOLERANCE) * evidence + ORDER_FLOOR
+    assert "the evidence's order is kept" in sel.reason
+    fig = plot_order_selection(model)
+    labels = fig.axes[1].get_legend_handles_labels()[1]
+    assert f"short-record order {sel.short_record_states} (evidence's" in labels[-1]
+    plt.close(fig)
 
 
 def test_records_too_short_for_the_projection_keep_p_plus_2():

@@ -25,9 +25,10 @@ it. The rule, whose inputs are all kept in ``order_selection_``:
   error of 8.0 mV, 6 states 0.49 mV);
 * records too short for the projection get ``p + 2`` states (empty
   evidence);
-* on short records the order is lowered until the auto-sized network has
-  at most one weight per :data:`SAMPLES_PER_WEIGHT` training samples, down
-  to ``p + 2``;
+* on short records the order lowered until the auto-sized network has
+  at most one weight per :data:`SAMPLES_PER_WEIGHT` training samples (down
+  to ``p + 2``) is a candidate beside the evidence's, kept, with a warning,
+  where its linear model validates as well (:func:`short_record_cap`);
 * where no linear model explains the records (best NRMSE above
   :data:`RELIABLE_NRMSE`, or none stable: the hysteretic oscillator's drift,
   an integrator), the order is the singular values' largest gap
@@ -43,6 +44,8 @@ own weights. Both estimators take the rule through
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from sklearn.utils import Bunch
 
@@ -52,6 +55,7 @@ from sysid_nn._engine._issm_start import (
     subspace_records,
 )
 from sysid_nn._engine._subspace import is_stable, output_error_model, projection
+from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._kernels._linear import linear_free_run
 
 #: Largest linear order tried.
@@ -85,8 +89,10 @@ def select_order(est, train, val, n_weights) -> Bunch:
     the ratio of successive singular values is largest), ``validated_order``
     (the gap order when no candidate is stable), ``linear_order`` (the gap
     order instead when larger and within the tolerance), ``n_outputs`` and
-    ``n_states`` (the rule above), and the rule's constants ``tolerance``,
-    ``floor`` and ``reliable``.
+    ``n_states`` (the rule above), the rule's constants ``tolerance``,
+    ``floor`` and ``reliable``, and the short-record rule's evidence
+    (:func:`short_record_cap`): ``evidence_states``,
+    ``short_record_states``, ``short_record_scores`` and ``reason``.
     """
     p = est.n_outputs_
     top = MAX_ORDER
@@ -102,6 +108,8 @@ def select_order(est, train, val, n_weights) -> Bunch:
             gap_order=None, validated_order=None, linear_order=None,
             n_outputs=p, n_states=p + 2,
             tolerance=ORDER_TOLERANCE, floor=ORDER_FLOOR, reliable=RELIABLE_NRMSE,
+            evidence_states=p + 2, short_record_states=None, short_record_scores=empty,
+            reason="records too short for the subspace projection: p + 2 states",
         )  # fmt: skip
     Y, U = subspace_records(est, train)
     proj = projection(Y, U, horizon, constant=True)
@@ -122,10 +130,12 @@ def select_order(est, train, val, n_weights) -> Bunch:
         n_states = max(extra_states(linear_order, p) + linear_order, p + 2)
     else:
         n_states = max(gap_order, p + 2)
-    # Short records: no more weights than a tenth of the training samples.
-    n_samples = len(train.modelled) * p
-    while n_states > p + 2 and n_weights(n_states) * SAMPLES_PER_WEIGHT > n_samples:
-        n_states -= 1
+    # Short records: no more weights than a tenth of the training samples,
+    # where the linear model of the lower order validates as well.
+    cap = short_record_cap(
+        est, orders, scores, n_states, n_weights, len(train.modelled) * p
+    )
+    n_states = cap.n_states
     return Bunch(
         orders=orders,
         scores=scores,
@@ -138,6 +148,74 @@ def select_order(est, train, val, n_weights) -> Bunch:
         tolerance=ORDER_TOLERANCE,
         floor=ORDER_FLOOR,
         reliable=RELIABLE_NRMSE,
+        evidence_states=cap.evidence_states,
+        short_record_states=cap.short_record_states,
+        short_record_scores=cap.short_record_scores,
+        reason=cap.reason,
+    )
+
+
+def short_record_cap(est, orders, scores, n_states, n_weights, n_samples) -> Bunch:
+    """The order the evidence found, or the short-record rule's, by validation.
+
+    The rule lowers ``n_states`` until the network has at most one weight
+    per :data:`SAMPLES_PER_WEIGHT` training samples (times outputs), down to
+    ``p + 2``. Where it lowers it, the lower order is a candidate beside the
+    evidence's: it is kept where the best validation free run of the
+    linear models of ``orders`` up to it (``scores``) is within
+    :data:`ORDER_TOLERANCE` (plus :data:`ORDER_FLOOR`) of the best up to
+    the evidence's order (a network of fewer weights that loses nothing a
+    linear model sees), with a :class:`UserWarning`; otherwise the
+    evidence's order stays. Returns a Bunch: ``n_states`` (the order kept),
+    ``evidence_states``, ``short_record_states`` (None where the rule does
+    not lower it), ``short_record_scores`` (the best validation free-run
+    NRMSE of the linear models up to each of the two, evidence first; empty
+    where the rule does not lower it) and ``reason`` (one sentence).
+    """
+    p = est.n_outputs_
+    lowered = n_states
+    while lowered > p + 2 and n_weights(lowered) * SAMPLES_PER_WEIGHT > n_samples:
+        lowered -= 1
+    if lowered == n_states:
+        return Bunch(
+            n_states=n_states, evidence_states=n_states, short_record_states=None,
+            short_record_scores=np.array([]), reason="the order the evidence found",
+        )  # fmt: skip
+    # A network of n states holds the linear models of every order up to n:
+    # each order is scored by the best of those (the candidates' scores).
+    scores = np.array(
+        [np.min(scores[orders <= n], initial=np.inf) for n in (n_states, lowered)]
+    )
+    kept = scores[1] <= (1.0 + ORDER_TOLERANCE) * scores[0] + ORDER_FLOOR
+    per_weight = (
+        f"the training records hold fewer than {SAMPLES_PER_WEIGHT} samples per "
+        f"weight of the network of {n_states} states"
+    )
+    if kept:
+        reason = (
+            f"{per_weight}, and the linear models of up to {lowered} states "
+            f"validate within {100 * ORDER_TOLERANCE:g} % of those up to {n_states} "
+            f"(free-run NRMSE {scores[1]:.3g} against {scores[0]:.3g})"
+        )
+        warnings.warn(
+            f"{type(est).__name__} lowered the order the records show from "
+            f"{n_states} to {lowered} states: {reason}; give the order "
+            "explicitly to keep it.",
+            UserWarning,
+            stacklevel=user_stacklevel(),
+        )
+    else:
+        reason = (
+            f"{per_weight}, but the linear models of up to {lowered} states "
+            f"validate worse (free-run NRMSE {scores[1]:.3g} against {scores[0]:.3g}): "
+            "the evidence's order is kept"
+        )
+    return Bunch(
+        n_states=lowered if kept else n_states,
+        evidence_states=n_states,
+        short_record_states=lowered,
+        short_record_scores=scores,
+        reason=reason,
     )
 
 

@@ -233,7 +233,13 @@ class ISSMRegressor(_RecurrentRegressorBase):
         of ``n_states``), ``tolerance``, ``floor`` and ``reliable`` (the
         rule's constants).
         Records too short for the projection get ``p + 2`` states, with
-        empty evidence and ``linear_order=None``.
+        empty evidence and ``linear_order=None``. The short-record rule:
+        ``evidence_states`` (the order before it), ``short_record_states``
+        (the order it offers, None where it does not lower the order),
+        ``short_record_scores`` (the best validation NRMSE of the linear
+        models up to each, evidence first) and ``reason`` (the decision in
+        one sentence); the lower order is kept only where it validates as
+        well, with a warning.
     shooting_ : {"filter", "measured"}
         How the multiple-shooting segments of the simulation focus start:
         from the model's own one-step predictor, or from the measured
