@@ -166,8 +166,8 @@ def test_refinement_reports_the_start_of_its_linear_model(monkeypatch):
     choose = _selection.choose
 
     def refinement_wins(est, train, val, runs, linear):
-        bounded = choose(est, train, val, runs, linear)[2]
-        return runs[-1], "restart", bounded
+        _, _, bounded, excursions = choose(est, train, val, runs, linear)
+        return runs[-1], "restart", bounded, excursions
 
     monkeypatch.setattr(ISSMRegressor, "_fit_one", spy)
     monkeypatch.setattr(_selection, "choose", refinement_wins)
