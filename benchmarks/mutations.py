@@ -148,6 +148,36 @@ MUTATIONS = (
         "kept = False",
         ("tests/test_order.py::test_short_records_lower_the_order",),
     ),
+    Mutation(
+        "constant-input response of the wrong side allowed",
+        "sysid_nn/_engine/_selection.py",
+        "wrong = np.sign(end - end[mid]) * lin_side < 0",
+        "wrong = np.sign(end - end[mid]) * lin_side > 0",
+        (
+            "tests/test_selection.py::"
+            "test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen",
+        ),
+    ),
+    Mutation(
+        "constant-input swing not judged",
+        "sysid_nn/_engine/_selection.py",
+        "max(beyond.max(), (swing / bound).max())",
+        "beyond.max()",
+        (
+            "tests/test_selection.py::"
+            "test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen",
+        ),
+    ),
+    Mutation(
+        "constant-input excursion not disqualifying",
+        "sysid_nn/_engine/_selection.py",
+        "and bool(x <= 1.0)",
+        "and bool(x <= np.inf)",
+        (
+            "tests/test_selection.py::"
+            "test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen",
+        ),
+    ),
 )
 
 

@@ -391,3 +391,61 @@ def test_burn_in_only_for_records_that_start_in_motion():
     burn, settled = burn_in(model, model.coefs_, in_motion)
     assert 40 <= burn <= 100
     assert settled
+
+
+def _first_order_tdl():
+    """A fitted one-lag linear TDL and its standardised training records."""
+    rng = np.random.default_rng(0)
+    # A slow excitation: the outputs' second differences are small.
+    u = lfilter([0.1], [1, -0.95], rng.standard_normal(600))[:, None]
+    y = lfilter([0, 0.5], [1, -0.5], u[:, 0])
+    model = TDLRegressor(
+        hidden_layer_sizes=(), output_lags=1, input_lags=1, n_init=1,
+        max_iter=2, early_stopping=False, random_state=0,
+    ).fit(u, y)  # fmt: skip
+    return model, model._stack([u], [y[:, None]])
+
+
+def test_constant_input_responses_show_where_a_run_settles_and_swings():
+    from sysid_nn._engine._selection import level_responses
+
+    model, train = _first_order_tdl()
+    # Weights [output lag, excitation lag, bias] on standardised values.
+    end, swing = level_responses(model, np.array([0.5, 0.5, 0.0]), train)
+    u_levels = np.quantile(train.U[train.modelled], (0, 0.25, 0.5, 0.75, 1), axis=0)
+    # Static gain 0.5 / (1 - 0.5) = 1: each run ends at its level.
+    np.testing.assert_allclose(end, u_levels, rtol=1e-2)
+    np.testing.assert_array_equal(swing, 0.0)
+    # A pole at -1 swings for ever about its level: it never settles.
+    end, swing = level_responses(model, np.array([-1.0, 0.5, 0.0]), train)
+    assert np.isnan(end).all()
+    assert (swing > 1.0).all()
+
+
+def test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen():
+    # On the Cascaded Tanks benchmark a restart that validated best settled
+    # at 100 V under the lowest training input, where the linear model fell
+    # below the training outputs, and ran the test record to 107 V.
+    from sysid_nn._engine._selection import LinearCandidate, choose, excursion_ratios
+
+    model, train = _first_order_tdl()
+    linear = LinearCandidate(
+        run=_run(np.array([0.5, 0.5, 0.0]), 1.0, 1.0), w=np.array([0.5, 0.5, 0.0])
+    )
+    wrong = _run(np.array([0.5, -5.0, 0.0]), 0.1, 0.1)  # gain -10
+    swinging = _run(np.array([-1.0, 0.5, 0.0]), 0.1, 0.2)  # a pole at -1
+    steeper = _run(np.array([0.5, 2.0, 0.0]), 0.1, 0.3)  # gain 4, beyond range
+    ratios = excursion_ratios(model, [wrong, swinging, steeper], train, linear)
+    # Wrong side: how far beyond the training outputs' largest value.
+    reach = np.abs(train.Y[train.modelled]).max()
+    u_max = np.abs(train.U[train.modelled]).max()
+    assert ratios[0] == pytest.approx(10 * u_max / reach, rel=1e-2)
+    assert ratios[1] > 1.0
+    # Settling further out on the linear model's side is not judged.
+    assert ratios[2] == 0.0
+    runs = [wrong, swinging, steeper]
+    chosen, selected, bounded, excursions = choose(model, train, train, runs, linear)
+    assert chosen is steeper
+    assert selected == "restart"
+    assert bounded == [False, False, True]
+    np.testing.assert_array_equal(excursions, ratios)
