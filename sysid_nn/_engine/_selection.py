@@ -277,14 +277,17 @@ def level_responses(est, w: np.ndarray, train) -> tuple[np.ndarray, np.ndarray]:
     ``(n_levels, n_outputs)`` (NaN where the run has not settled: its last
     step is larger than the training outputs' median step), and the
     largest second difference over each run's second half, of shape
-    ``(n_levels,)`` (``inf`` where the run diverged).
+    ``(n_levels,)`` (NaN where the run diverged: a run away under a
+    constant input held at an extreme of the excitation is not judged, as
+    the hysteretic oscillator's best networks ran away there and tested
+    best, and an integrating plant's drift is real).
     """
     seqs = _sequences(train.Y, train)
     steps = np.concatenate([np.abs(np.diff(y, axis=0)).ravel() for y in seqs])
     pace = float(np.median(steps)) if steps.size else 0.0
     levels = np.quantile(train.U[train.modelled], _LEVELS, axis=0)
     end = np.full((len(levels), train.Y.shape[1]), np.nan)
-    swing = np.full(len(levels), np.inf)
+    swing = np.full(len(levels), np.nan)
     for i, level in enumerate(levels):
         held = replace(train, U=np.broadcast_to(level, train.U.shape).copy())
         Yhat, _, diverged, _ = est._run(w, held, _FREE_RUN, False, keep_state=False)
@@ -324,7 +327,7 @@ def excursion_ratios(est, runs: list, train, linear) -> np.ndarray:
     lin_end = np.full((len(_LEVELS), train.Y.shape[1]), np.nan)
     if linear is not None:
         lin_end, lin_swing = level_responses(est, linear.w, train)
-        calm = np.maximum(calm, np.where(np.isfinite(lin_swing), lin_swing, 0.0))
+        calm = np.maximum(calm, np.nan_to_num(lin_swing, nan=0.0))
     bound = _EXCURSION * np.maximum(calm, np.finfo(float).tiny)
     mid = _LEVELS.index(0.5)
     lin_side = np.sign(lin_end - lin_end[mid])
@@ -333,7 +336,8 @@ def excursion_ratios(est, runs: list, train, linear) -> np.ndarray:
         end, swing = level_responses(est, r.w, train)
         wrong = np.sign(end - end[mid]) * lin_side < 0  # False where NaN
         beyond = np.where(wrong, np.abs(end) / reach, 0.0)
-        ratios.append(float(max(beyond.max(), (swing / bound).max())))
+        swung = np.nan_to_num(swing / bound, nan=0.0)
+        ratios.append(float(max(beyond.max(), swung.max())))
     return np.array(ratios)
 
 

@@ -581,14 +581,13 @@ class _RecurrentRegressorBase(
         return 0.0
 
     def _estimates_start(self) -> bool:
-        """Whether validation runs can start from a state taken from, or
-        fitted to, each record's first samples (see ``_fitted_start``)."""
+        """Whether a run's initial state holds more than measured outputs."""
         return False
 
     def _fitted_start(self, w: np.ndarray, data: _Data, window: int) -> _Data:
-        """``data`` with initial states taken from, or fitted to, each
-        sequence's first ``window`` modelled rows (see
-        ``_estimates_start``); here none: the history rows stay."""
+        """``data`` with initial states fitted to each sequence's first
+        ``window`` modelled rows (see ``_estimates_start``): here the
+        measured history rows already are the whole initial condition."""
         return data
 
     def _linear_start_restarts(self) -> list[int]:

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import numbers
-from dataclasses import replace
-from itertools import pairwise
 from math import comb
 
 import numpy as np
@@ -417,21 +415,6 @@ such, default=None
 
     def _auto_alpha(self) -> float:
         return _NOISY_ALPHA if self.shooting_ == "free" else 0.0
-
-    def _estimates_start(self) -> bool:
-        return True
-
-    def _fitted_start(self, w, data, window):
-        # The initial condition read from the record, as
-        # ``simulate(X, y_init=y[:h])`` takes it: each sequence's first
-        # ``h`` measured rows become its history (the rows at rest go).
-        h = data.h
-        keep = [np.arange(a + h, b) for a, b in pairwise(data.starts)]
-        if h == 0 or any(len(rows) <= h for rows in keep):
-            return data
-        rows = np.concatenate(keep)
-        starts = np.concatenate([[0], np.cumsum([len(k) for k in keep])])
-        return replace(data, Y=data.Y[rows], U=data.U[rows], starts=starts)
 
     def _stage_objective(self, data: _Data, seg: int, mask, n_res: int, alpha):
         # Free-state shooting fits each segment's initial lags beside the
