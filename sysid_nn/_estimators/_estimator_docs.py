@@ -87,18 +87,19 @@ restart_losses_ : ndarray
     candidate only where this is no worse than ``linear_loss_``.
 restart_bounded_ : ndarray of bool
     Whether each restart's free run stays bounded when the training
-    excitation is scaled to twice its amplitude about its mean, and
-    settles near the training outputs under constant inputs within the
-    training range (``restart_excursions_`` at most 1); the others are
-    candidates only where none passes.
+    excitation is scaled to twice its amplitude about its mean, and passes
+    the constant-input check (``restart_excursions_`` at most 1); the
+    others are candidates only where none passes.
 restart_excursions_ : ndarray
-    Each restart's largest output, standardised, of its free runs from
-    rest under constant inputs at the minimum, quartiles and maximum of
-    the training excitation, over four times the larger of the training
-    outputs' largest standardised value and the linear model's output
-    under the same input (``inf``: the run diverged; a level at which the
-    linear model itself runs away, as an integrating plant's does under a
-    constant force, bounds nothing).
+    Each restart's constant-input check: its free runs from rest under
+    constant inputs at the minimum, quartiles and maximum of the training
+    excitation, against the linear model's. The larger of two ratios: how
+    far a run settles beyond the training outputs on the side opposite to
+    the linear model's response, over the training outputs' largest
+    standardised value; and the largest second difference over a run's
+    second half, over four times the larger of the training outputs'
+    largest and the linear model's. Runs that diverge or have not settled
+    count 0. Above 1 holds the restart out (``restart_bounded_``).
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
 best_restart_ : int or None
