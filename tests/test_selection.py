@@ -432,14 +432,16 @@ def test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen():
     linear = LinearCandidate(
         run=_run(np.array([0.5, 0.5, 0.0]), 1.0, 1.0), w=np.array([0.5, 0.5, 0.0])
     )
-    wrong = _run(np.array([0.5, -5.0, 0.0]), 0.1, 0.1)  # gain -10
+    wrong = _run(np.array([0.5, -20.0, 0.0]), 0.1, 0.1)  # gain -40
     swinging = _run(np.array([-1.0, 0.5, 0.0]), 0.1, 0.2)  # a pole at -1
-    steeper = _run(np.array([0.5, 2.0, 0.0]), 0.1, 0.3)  # gain 4, beyond range
+    steeper = _run(np.array([0.5, 20.0, 0.0]), 0.1, 0.3)  # gain 40, same side
     ratios = excursion_ratios(model, [wrong, swinging, steeper], train, linear)
-    # Wrong side: how far beyond the training outputs' largest value.
+    # Wrong side: how far, over ten times the training outputs' largest
+    # value.
     reach = np.abs(train.Y[train.modelled]).max()
     u_max = np.abs(train.U[train.modelled]).max()
-    assert ratios[0] == pytest.approx(10 * u_max / reach, rel=1e-2)
+    assert ratios[0] == pytest.approx(40 * u_max / (10 * reach), rel=1e-2)
+    assert ratios[0] > 1.0
     assert ratios[1] > 1.0
     # Settling further out on the linear model's side is not judged.
     assert ratios[2] == 0.0

@@ -94,12 +94,12 @@ restart_excursions_ : ndarray
     Each restart's constant-input check: its free runs from rest under
     constant inputs at the minimum, quartiles and maximum of the training
     excitation, against the linear model's. The larger of two ratios: how
-    far a run settles beyond the training outputs on the side opposite to
-    the linear model's response, over the training outputs' largest
-    standardised value; and the largest second difference over a run's
-    second half, over four times the larger of the training outputs'
-    largest and the linear model's. Runs that diverge or have not settled
-    count 0. Above 1 holds the restart out (``restart_bounded_``).
+    far a run settles on the side opposite to the linear model's response,
+    over ten times the training outputs' largest standardised value; and
+    the largest second difference over a run's second half, over ten
+    times the larger of the training outputs' largest and the linear
+    model's. Runs that diverge or have not settled count 0. Above 1 holds
+    the restart out (``restart_bounded_``).
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
 best_restart_ : int or None
