@@ -72,10 +72,11 @@ _LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: to the next) and tested at 7.2 V. A system whose static response truly
 #: turns (a squared input, ``tests/test_schedule.py``) gave its best fits
 #: 0.9-2.6 times on the wrong side; a Wiener-Hammerstein-type system's
-#: networks swung up to 1.6 times; 10 lies between. How far a run settles on the linear model's
-#: side is not judged: the hysteretic oscillator's networks settled at
-#: 60-78 standard deviations under its largest force held (its
-#: softening), a Wiener-Hammerstein-type system's best at 78 (its cubic).
+#: networks swung up to 1.6 times; 10 lies between. How far a run
+#: settles on the linear model's side is not judged: the hysteretic
+#: oscillator's networks settled at 60-78 standard deviations under its
+#: largest force held (its softening), a Wiener-Hammerstein-type system's
+#: best at 78 (its cubic).
 _EXCURSION = 10.0
 
 
