@@ -134,7 +134,7 @@ MUTATIONS = (
     Mutation(
         "short-record order always",
         "sysid_nn/_engine/_order.py",
-        "kept = scores[1] <= (1.0 + ORDER_TOLERANCE) * scores[0] + ORDER_FLOOR",
+        "kept = scores[1] <= (1.0 + SHORT_RECORD_TOLERANCE) * scores[0] + ORDER_FLOOR",
         "kept = True",
         (
             "tests/test_order.py::"
@@ -144,7 +144,7 @@ MUTATIONS = (
     Mutation(
         "short-record order never",
         "sysid_nn/_engine/_order.py",
-        "kept = scores[1] <= (1.0 + ORDER_TOLERANCE) * scores[0] + ORDER_FLOOR",
+        "kept = scores[1] <= (1.0 + SHORT_RECORD_TOLERANCE) * scores[0] + ORDER_FLOOR",
         "kept = False",
         ("tests/test_order.py::test_short_records_lower_the_order",),
     ),
@@ -176,6 +176,16 @@ MUTATIONS = (
         (
             "tests/test_selection.py::"
             "test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen",
+        ),
+    ),
+    Mutation(
+        "short-record tolerance of the linear order rule",
+        "sysid_nn/_engine/_order.py",
+        "SHORT_RECORD_TOLERANCE = 0.3",
+        "SHORT_RECORD_TOLERANCE = ORDER_TOLERANCE",
+        (
+            "tests/test_order.py::"
+            "test_short_record_order_kept_where_the_evidence_gains_little",
         ),
     ),
 )

@@ -21,6 +21,7 @@ from sysid_nn._engine._order import (
     ORDER_FLOOR,
     ORDER_TOLERANCE,
     SAMPLES_PER_WEIGHT,
+    SHORT_RECORD_TOLERANCE,
     _n_weights,
 )
 from sysid_nn.plotting import plot_order_selection
@@ -129,7 +130,7 @@ def test_short_records_lower_the_order():
     assert SAMPLES_PER_WEIGHT * _n_weights(short, n) <= 2000
     assert SAMPLES_PER_WEIGHT * _n_weights(short, n + 1) > 2000
     evidence, lowered = sel.short_record_scores
-    assert lowered <= (1 + ORDER_TOLERANCE) * evidence + ORDER_FLOOR
+    assert lowered <= (1 + SHORT_RECORD_TOLERANCE) * evidence + ORDER_FLOOR
     assert "validate within" in sel.reason
 
 
@@ -158,12 +159,31 @@ def test_short_record_order_that_misses_the_dynamics_loses_to_the_evidence():
     assert sel.short_record_states is not None
     assert sel.short_record_states < 6 < sel.evidence_states == model.n_states_
     evidence, lowered = sel.short_record_scores
-    assert lowered > (1 + ORDER_TOLERANCE) * evidence + ORDER_FLOOR
+    assert lowered > (1 + SHORT_RECORD_TOLERANCE) * evidence + ORDER_FLOOR
     assert "the evidence's order is kept" in sel.reason
     fig = plot_order_selection(model)
     labels = fig.axes[1].get_legend_handles_labels()[1]
     assert f"short-record order {sel.short_record_states} (evidence's" in labels[-1]
     plt.close(fig)
+
+
+def test_short_record_order_kept_where_the_evidence_gains_little():
+    # A Wiener-Hammerstein-type record (filter, cubic, filter) of 1500
+    # samples: the linear models up to the lowered order validate 14 %
+    # worse than the evidence's 12 states, a loss a network's
+    # non-linearity makes up for (its networks tested 2-4 times better
+    # than those of 12 states), so the lowered order is kept.
+    rng = np.random.default_rng(7)
+    u = rng.standard_normal(1500)
+    w = lfilter([0.0, 0.4, 0.2], [1.0, -1.2, 0.5], u)
+    y = lfilter([0.0, 0.3], [1.0, -0.6], w + 0.3 * w**3)
+    with pytest.warns(UserWarning, match="lowered the order the records show"):
+        model = ISSMRegressor(n_init=1, max_iter=1, random_state=0).fit(u[:, None], y)
+    sel = model.order_selection_
+    assert model.n_states_ == sel.short_record_states < sel.evidence_states
+    evidence, lowered = sel.short_record_scores
+    assert (1 + ORDER_TOLERANCE) * evidence < lowered
+    assert lowered <= (1 + SHORT_RECORD_TOLERANCE) * evidence
 
 
 def test_records_too_short_for_the_projection_keep_p_plus_2():
