@@ -74,9 +74,10 @@ SAMPLES_PER_WEIGHT = 10
 #: on a Wiener-Hammerstein-type record of 1500 samples the lowered order's
 #: linear models validated 14 % worse, and its networks tested 2.3 (TDL)
 #: and 4 (ISSM) times better than those of the evidence's order; on
-#: generated lightly damped chains they validated 71 % (two modes, 1024
-#: samples) and 139 % (three modes, 2000 samples) worse, and the
-#: evidence's order tested 10-20 times better (``benchmarks/bench_linear.py``).
+#: generated lightly damped chains they validated 71-103 % (two modes,
+#: 1024 samples) and 40-139 % (three modes, 2000 samples) worse, and the
+#: evidence's order tested 10-20 times better
+#: (``benchmarks/bench_linear.py``).
 SHORT_RECORD_TOLERANCE = 0.3
 #: Smallest hidden width of ``hidden_layer_sizes="auto"``.
 AUTO_WIDTH = 7
