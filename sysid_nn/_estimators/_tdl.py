@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numbers
-from dataclasses import replace
 from math import comb
 
 import numpy as np
@@ -15,7 +14,7 @@ from sysid_nn._engine._layout import MLPLayout
 from sysid_nn._engine._least_squares import with_intercept
 from sysid_nn._engine._order import tdl_auto_width
 from sysid_nn._engine._shooting import _FreeStateObjective
-from sysid_nn._engine._state_estimation import fit_initial_condition, lowpass
+from sysid_nn._engine._state_estimation import lowpass
 from sysid_nn._estimators._base import _RecurrentRegressorBase
 from sysid_nn._estimators._estimator_docs import document_estimator
 from sysid_nn._kernels._mlp import ACTIVATIONS, n_hidden
@@ -416,40 +415,6 @@ such, default=None
 
     def _auto_alpha(self) -> float:
         return _NOISY_ALPHA if self.shooting_ == "free" else 0.0
-
-    def _estimates_start(self) -> bool:
-        return self.output_lags_ > 0
-
-    def _fitted_start(self, w, data, window):
-        # The output lags whose free run best fits the first ``window``
-        # modelled rows, as ``y_init`` fits them (output-error least
-        # squares): the measured lags alone carry the record's noise and
-        # quantisation into every later sample of an integrating plant.
-        spans = [
-            np.arange(a, min(a + data.h + window, b))
-            for a, b in zip(data.starts[:-1], data.starts[1:], strict=True)
-        ]
-        head = _Data(
-            Y=data.Y[np.concatenate(spans)].copy(),
-            U=data.U[np.concatenate(spans)],
-            h=data.h,
-            starts=np.r_[0, np.cumsum([len(r) for r in spans])],
-        )
-        lags = np.concatenate([np.arange(a, a + data.h) for a in head.starts[:-1]])
-        target = head.Y[head.modelled]
-
-        def residuals(v):
-            head.Y[lags] = v.reshape(len(lags), -1)
-            Yhat = self._run(w, head, _FREE_RUN, False, keep_state=False)[0]
-            return (Yhat[head.modelled] - target).ravel()
-
-        # From the first measured output held (a start at rest there).
-        firsts = np.repeat(head.Y[head.starts[:-1] + data.h], data.h, axis=0)
-        v = fit_initial_condition(residuals, firsts.ravel())[0]
-        fitted = data.Y.copy()
-        rows = np.concatenate([np.arange(a, a + data.h) for a in data.starts[:-1]])
-        fitted[rows] = v.reshape(len(rows), -1)
-        return replace(data, Y=fitted)
 
     def _stage_objective(self, data: _Data, seg: int, mask, n_res: int, alpha):
         # Free-state shooting fits each segment's initial lags beside the
