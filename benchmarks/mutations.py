@@ -161,8 +161,8 @@ MUTATIONS = (
     Mutation(
         "constant-input swing not judged",
         "sysid_nn/_engine/_selection.py",
-        "max(beyond.max(), (swing / bound).max())",
-        "beyond.max()",
+        "ratios.append(float(max(beyond.max(), swung.max())))",
+        "ratios.append(float(beyond.max()))",
         (
             "tests/test_selection.py::"
             "test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen",

@@ -407,17 +407,21 @@ def _first_order_tdl():
 
 
 def test_constant_input_responses_show_where_a_run_settles_and_swings():
-    from sysid_nn._engine._selection import level_responses
+    from sysid_nn._engine._selection import _median_step, level_responses
 
     model, train = _first_order_tdl()
     # Weights [output lag, excitation lag, bias] on standardised values.
-    end, swing = level_responses(model, np.array([0.5, 0.5, 0.0]), train)
+    end, swing = level_responses(
+        model, np.array([0.5, 0.5, 0.0]), train, _median_step(train)
+    )
     u_levels = np.quantile(train.U[train.modelled], (0, 0.25, 0.5, 0.75, 1), axis=0)
     # Static gain 0.5 / (1 - 0.5) = 1: each run ends at its level.
     np.testing.assert_allclose(end, u_levels, rtol=1e-2)
     np.testing.assert_array_equal(swing, 0.0)
     # A pole at -1 swings for ever about its level: it never settles.
-    end, swing = level_responses(model, np.array([-1.0, 0.5, 0.0]), train)
+    end, swing = level_responses(
+        model, np.array([-1.0, 0.5, 0.0]), train, _median_step(train)
+    )
     assert np.isnan(end).all()
     assert (swing > 1.0).all()
 

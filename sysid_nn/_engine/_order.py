@@ -28,7 +28,8 @@ it. The rule, whose inputs are all kept in ``order_selection_``:
 * on short records the order lowered until the auto-sized network has
   at most one weight per :data:`SAMPLES_PER_WEIGHT` training samples (down
   to ``p + 2``) is a candidate beside the evidence's, kept, with a warning,
-  where its linear model validates as well (:func:`short_record_cap`);
+  where its linear models validate within :data:`SHORT_RECORD_TOLERANCE`
+  of the evidence's (:func:`short_record_cap`);
 * where no linear model explains the records (best NRMSE above
   :data:`RELIABLE_NRMSE`, or none stable: the hysteretic oscillator's drift,
   an integrator), the order is the singular values' largest gap
@@ -206,8 +207,7 @@ def short_record_cap(est, orders, scores, n_states, n_weights, n_samples) -> Bun
         reason = (
             f"{per_weight}, and the linear models of up to {lowered} states "
             f"validate within {100 * SHORT_RECORD_TOLERANCE:g} % of those up to "
-            f"{n_states} "
-            f"(free-run NRMSE {scores[1]:.3g} against {scores[0]:.3g})"
+            f"{n_states} (free-run NRMSE {scores[1]:.3g} against {scores[0]:.3g})"
         )
         warnings.warn(
             f"{type(est).__name__} lowered the order the records show from "

@@ -27,10 +27,10 @@ from __future__ import annotations
 import copy
 import warnings
 from dataclasses import dataclass, replace
-from itertools import pairwise
 
 import numpy as np
 
+from sysid_nn._engine._state_estimation import _segments
 from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._records._data import _FREE_RUN
 
@@ -272,23 +272,23 @@ def bounded_beyond_range(est, w: np.ndarray, train) -> bool:
     return not (diverged >= 0).any()
 
 
-def level_responses(est, w: np.ndarray, train) -> tuple[np.ndarray, np.ndarray]:
+def level_responses(
+    est, w: np.ndarray, train, pace: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Where ``w``'s free runs under constant inputs settle, and how they swing.
 
     One run from rest per level of :data:`_LEVELS` (every input channel at
     that quantile of its training values, for as long as the training
     records). Returns the standardised output each run ends at, of shape
     ``(n_levels, n_outputs)`` (NaN where the run has not settled: its last
-    step is larger than the training outputs' median step), and the
-    largest second difference over each run's second half, of shape
-    ``(n_levels,)`` (NaN where the run diverged: a run away under a
-    constant input held at an extreme of the excitation is not judged, as
-    the hysteretic oscillator's best networks ran away there and tested
-    best, and an integrating plant's drift is real).
+    step is larger than ``pace``, the training outputs' median step, see
+    :func:`_median_step`), and the largest second difference over each
+    run's second half, of shape ``(n_levels,)`` (NaN where the run
+    diverged: a run away under a constant input held at an extreme of the
+    excitation is not judged, as the hysteretic oscillator's best networks
+    ran away there and tested best, and an integrating plant's drift is
+    real).
     """
-    seqs = _sequences(train.Y, train)
-    steps = np.concatenate([np.abs(np.diff(y, axis=0)).ravel() for y in seqs])
-    pace = float(np.median(steps)) if steps.size else 0.0
     levels = np.quantile(train.U[train.modelled], _LEVELS, axis=0)
     end = np.full((len(levels), train.Y.shape[1]), np.nan)
     swing = np.full(len(levels), np.nan)
@@ -307,7 +307,14 @@ def level_responses(est, w: np.ndarray, train) -> tuple[np.ndarray, np.ndarray]:
 
 def _sequences(Y: np.ndarray, data) -> list[np.ndarray]:
     """The modelled rows of each sequence of ``data`` in ``Y``."""
-    return [Y[a + data.h : b] for a, b in pairwise(data.starts)]
+    return [Y[a:b] for a, b in _segments(data.starts, data.h)]
+
+
+def _median_step(train) -> float:
+    """The training outputs' median step (0 for records of one sample)."""
+    steps = [np.abs(np.diff(y, axis=0)).ravel() for y in _sequences(train.Y, train)]
+    steps = np.concatenate(steps)
+    return float(np.median(steps)) if steps.size else 0.0
 
 
 def _swing(y: np.ndarray) -> float:
@@ -326,19 +333,19 @@ def excursion_ratios(est, runs: list, train, linear) -> np.ndarray:
     outputs' largest second difference and the linear model's swing at
     that level.
     """
-    seqs = _sequences(train.Y, train)
+    pace = _median_step(train)
     reach = max(np.abs(train.Y[train.modelled]).max(), np.finfo(float).tiny)
-    calm = max(map(_swing, seqs))
+    calm = max(map(_swing, _sequences(train.Y, train)))
     lin_end = np.full((len(_LEVELS), train.Y.shape[1]), np.nan)
     if linear is not None:
-        lin_end, lin_swing = level_responses(est, linear.w, train)
+        lin_end, lin_swing = level_responses(est, linear.w, train, pace)
         calm = np.maximum(calm, np.nan_to_num(lin_swing, nan=0.0))
     bound = _EXCURSION * np.maximum(calm, np.finfo(float).tiny)
     mid = _LEVELS.index(0.5)
     lin_side = np.sign(lin_end - lin_end[mid])
     ratios = []
     for r in runs:
-        end, swing = level_responses(est, r.w, train)
+        end, swing = level_responses(est, r.w, train, pace)
         wrong = np.sign(end - end[mid]) * lin_side < 0  # False where NaN
         beyond = np.where(wrong, np.abs(end) / (_EXCURSION * reach), 0.0)
         swung = np.nan_to_num(swing / bound, nan=0.0)
@@ -350,9 +357,10 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None):
     """The run ``fit`` keeps, what it is and the evidence: ``(run,
     "restart" | "linear", bounded, excursions)``, a flag and a ratio per run.
 
-    Restarts whose free run diverges beyond the training range, or settles
-    far beyond it under a constant input within it (:func:`excursion_ratios`
-    above 1), are disqualified (unless all are), and with validation
+    Restarts whose free run diverges beyond the training range, or whose
+    free runs under constant inputs within it settle far out on the wrong
+    side or keep swinging (:func:`excursion_ratios` above 1), are
+    disqualified (unless all are), and with validation
     records those whose training loss is above the linear model's; the best
     remaining one is kept if its criterion beats the linear model's
     (validation loss, or training loss without validation), else the linear
