@@ -551,8 +551,8 @@ def test_tail_block_is_held_out_as_a_record_of_its_own():
     Xs, ys = _records(n=1, length=300)
     model = _small(validation_fraction=0.2)
     model.n_outputs_ = 1
-    head, yhead, val, yval = model._split_validation(Xs, [ys[0]], 5)
-    assert len(head[0]) == len(yhead[0]) == 240
+    head, yhead, val, yval, lead = model._split_validation(Xs, [ys[0]], 5)
+    assert len(head[0]) == len(yhead[0]) == lead == 240
     # The last fifth alone, judged as a record passed as X_val.
     np.testing.assert_array_equal(val[0], Xs[0][240:])
     np.testing.assert_array_equal(yval[0], ys[0][240:])

@@ -51,6 +51,13 @@ _START = 10
 _START_WINDOW = 50
 #: ... where that at least halves the linear model's validation error.
 _FITTED_START_GAIN = 0.5
+#: A held-out tail is judged as the continuation of its record where the
+#: linear model's response to its initial outputs keeps more than this
+#: share of its size (RMS over the last fifth of the tail against the
+#: first) and decays (below 1), and the record starts at rest: its first
+#: ``_START`` outputs within ``_AT_REST`` standard deviations of zero.
+_START_MEMORY = 0.3
+_AT_REST = 0.1
 #: Scores (standardised mean squared errors) this close are a tie.
 _TIE = 1e-12
 #: Restarts are disqualified whose free run diverges on the training
@@ -86,7 +93,9 @@ class LinearCandidate:
 
     ``k`` is the restart whose linear start it was trained from; ``burn``
     and ``start_window`` how validation records are judged (the ``_Data``
-    fields of those names), set by the linear model's response.
+    fields of those names), set by the linear model's response;
+    ``continued`` whether a held-out tail is judged as the continuation of
+    its record (the validation records' ``continuation``).
     """
 
     run: object
@@ -94,6 +103,7 @@ class LinearCandidate:
     k: int = 0
     burn: int = 0
     start_window: int = 0
+    continued: bool = False
 
 
 def _linear_copy(est):
@@ -151,6 +161,7 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
     ]
     run, k = min(fits, key=lambda fit: fit[0].criterion)  # the first of equals
     burn = start_window = 0
+    continued = False
     if val is not None:
         burn, settled = burn_in(lin, run.w, val)
         seg = lin._final_segment()  # judged as the restarts are
@@ -170,6 +181,19 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
             if fitted < _FITTED_START_GAIN * max(at_rest, np.finfo(float).tiny):
                 start_window = burn = window
                 loss = fitted  # ``val`` judged so
+        whole = val.continuation
+        if (
+            loss is None
+            and not settled
+            and whole is not None
+            and _START_MEMORY < start_memory(lin, run.w, val) < 1.0
+            and starts_at_rest(est, whole)
+        ):
+            # From rest, the tail shows mostly the response to its wrong
+            # start, which outlasts it; its record starts at rest, so the
+            # free run over the whole record is a run from rest.
+            continued, burn = True, 0
+            loss = validation_loss(lin, run.w, whole, seg)
         if loss is None:
             loss = validation_loss(lin, run.w, replace(val, burn=burn), seg)
         run = replace(run, criterion=loss, val_loss=loss)
@@ -179,6 +203,7 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
         k=k,
         burn=burn,
         start_window=start_window,
+        continued=continued,
     )
 
 
@@ -216,15 +241,12 @@ def burn_in(est, w: np.ndarray, data) -> tuple[int, bool]:
     as the oscillator's, were given half a record of burn-in by a rule
     that compared the burn-in with the rest).
     """
-    shifted = replace(data, Y=data.Y.copy())
-    for a in data.starts[:-1]:
-        shifted.Y[a : a + data.h] += 1.0
-    runs = [est._run(w, d, _FREE_RUN, False, keep_state=False) for d in (data, shifted)]
+    response = _start_response(est, w, data)
     cap = _burn_cap(data)
-    if any((r[2] >= 0).any() for r in runs):
+    if response is None:
         return cap, False
-    gap = np.abs(runs[1][0] - runs[0][0]).max(axis=1)
-    error = np.sum((runs[0][0] - data.Y) ** 2, axis=1)
+    gap, Yhat = response
+    error = np.sum((Yhat - data.Y) ** 2, axis=1)
     burn, settled = 0, True
     for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
         g, e = gap[a + data.h : b], error[a + data.h : b]
@@ -237,6 +259,56 @@ def burn_in(est, w: np.ndarray, data) -> tuple[int, bool]:
         if n and e[:_START].mean() > _TRANSIENT * e.mean():
             burn = max(burn, n)
     return burn, settled
+
+
+def _start_response(est, w: np.ndarray, data):
+    """``w``'s response to its initial outputs along ``data``.
+
+    Returns ``(gap, Yhat)``: per row, the largest change of the free run
+    from rest when every history output is one standard deviation higher,
+    and the free run from rest; None where either run diverged.
+    """
+    shifted = replace(data, Y=data.Y.copy())
+    for a in data.starts[:-1]:
+        shifted.Y[a : a + data.h] += 1.0
+    runs = [est._run(w, d, _FREE_RUN, False, keep_state=False) for d in (data, shifted)]
+    if any((r[2] >= 0).any() for r in runs):
+        return None
+    return np.abs(runs[1][0] - runs[0][0]).max(axis=1), runs[0][0]
+
+
+def start_memory(est, w: np.ndarray, data) -> float:
+    """The share of ``w``'s response to its initial outputs left at the end.
+
+    The RMS of the response (see :func:`_start_response`) over the last
+    fifth of every sequence over its RMS over the first fifth, the largest
+    over the sequences; ``inf`` where a run diverged. Below 1 the response
+    decays; near 1 the sequences are short against its decay.
+    """
+    response = _start_response(est, w, data)
+    if response is None:
+        return np.inf
+    gap = response[0]
+    shares = []
+    for a, b in zip(data.starts[:-1], data.starts[1:], strict=True):
+        g = gap[a + data.h : b]
+        k = max(1, len(g) // 5)
+        first = np.sqrt(np.mean(g[:k] ** 2))
+        shares.append(np.sqrt(np.mean(g[-k:] ** 2)) / max(first, 1e-12))
+    return float(max(shares))
+
+
+def starts_at_rest(est, data) -> bool:
+    """Whether every sequence's first ``_START`` outputs are at rest.
+
+    Within ``_AT_REST`` standard deviations of zero output (physical units;
+    the records are standardised, so the rest value is ``-mean / scale``).
+    """
+    rest = -est._y_mean / est._y_scale
+    heads = np.concatenate(
+        [data.Y[a + data.h : a + data.h + _START] for a in data.starts[:-1]]
+    )
+    return bool(np.all(np.abs(heads - rest) <= _AT_REST))
 
 
 def _burn_cap(data) -> int:

@@ -279,13 +279,14 @@ class _RecurrentRegressorBase(
             )
         min_len = self._min_samples()
         Xs, ys = trim_padding(Xs, ys, min_len, "X")
+        lead = 0
         if X_val is not None:
             Xv, yv, _, _ = self._validate_Xy(X_val, y_val, reset=False, y_required=True)
             Xv, yv = trim_padding(Xv, yv, min_len, "X_val")
             _mean_scale(np.concatenate(Xv), "X_val")
             _mean_scale(np.concatenate(yv), "y_val")
         elif self.early_stopping:
-            Xs, ys, Xv, yv = self._split_validation(Xs, ys, min_len)
+            Xs, ys, Xv, yv, lead = self._split_validation(Xs, ys, min_len)
         else:
             Xv = yv = None
         self._check_lengths(Xs, min_len)
@@ -295,12 +296,12 @@ class _RecurrentRegressorBase(
         Xc, yc = np.concatenate(Xs), np.concatenate(ys)
         self._x_mean, self._x_scale = _mean_scale(Xc, "X")
         self._y_mean, self._y_scale = _mean_scale(yc, "y")
-        train_data, val = self._stack_fit_records(Xs, ys, Xv, yv)
+        train_data, val = self._stack_fit_records(Xs, ys, Xv, yv, lead)
         with _single_threaded_blas():
             self._choose_order(train_data, val)
         if self._history_length() != train_data.h:
             # The chosen lags reach further back than the provisional ones.
-            train_data, val = self._stack_fit_records(Xs, ys, Xv, yv)
+            train_data, val = self._stack_fit_records(Xs, ys, Xv, yv, lead)
         self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train_data.Y).max())
         self._diagnose(train_data)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
@@ -345,10 +346,22 @@ class _RecurrentRegressorBase(
             )
         return self
 
-    def _stack_fit_records(self, Xs, ys, Xv, yv):
-        """The training and validation records stacked."""
+    def _stack_fit_records(self, Xs, ys, Xv, yv, lead: int = 0):
+        """The training and validation records stacked.
+
+        ``lead``: the validation record is the tail of the last training
+        record after its first ``lead`` samples; the whole record is kept
+        as the tail's ``continuation`` (see ``_split_validation``).
+        """
         train = self._stack(Xs, ys)
         val = self._stack(Xv, yv) if Xv is not None else None
+        if lead:
+            whole = self._stack(
+                [np.concatenate([Xs[-1], Xv[0]])], [np.concatenate([ys[-1], yv[0]])]
+            )
+            val = dataclasses.replace(
+                val, continuation=dataclasses.replace(whole, lead=lead)
+            )
         return train, val
 
     def _choose_order(self, train: _Data, val: _Data | None) -> None:
@@ -384,6 +397,7 @@ class _RecurrentRegressorBase(
         with_validation = val is not None
         self.validation_burn_in_ = None if val is None else val.burn
         self.validation_start_window_ = None if val is None else val.start_window
+        self.validation_continues_record_ = None if val is None else val.lead > 0
         self.coefs_ = result.w
         self.fallback_ = result.fallback
         self.n_iter_ = chosen.n_iter
@@ -528,27 +542,31 @@ class _RecurrentRegressorBase(
     def _split_validation(self, Xs, ys, min_len):
         """Hold out whole sequences, or the tail block of a single one.
 
-        Returns ``(X_train, y_train, X_val, y_val)``. A tail block is a
-        validation record of its own, judged as one passed as ``X_val``:
-        from rest, after the burn-in or from the fitted start that
-        :func:`~sysid_nn._engine._selection.linear_candidate` sets. (Judged as the
-        continuation of a free run over the training part, it could not
-        see a network that never forgets its initial state: on Silverbox,
-        ``random_state=1`` chose one that tested at 7.4 mV from rest and
-        0.24 mV from a fitted start, where the tail from rest chose one of
-        0.32 mV.)
+        Returns ``(X_train, y_train, X_val, y_val, lead)``, ``lead`` the
+        samples of the record before a tail block (0 for whole sequences).
+        A tail block is a validation record of its own, judged as one
+        passed as ``X_val``: from rest, after the burn-in or from the
+        fitted start that :func:`~sysid_nn._engine._selection.linear_candidate`
+        sets. (Judged as the continuation of a free run over the training
+        part, it could not see a network that never forgets its initial
+        state: on Silverbox, ``random_state=1`` chose one that tested at
+        7.4 mV from rest and 0.24 mV from a fitted start, where the tail
+        from rest chose one of 0.32 mV.) The exception is a tail too short
+        for the response to its wrong start to die out, of a record that
+        starts at rest: there the continuation is a run from rest (see
+        ``linear_candidate``).
         """
         if len(Xs) >= 3:
             n_val = max(1, round(self.validation_fraction * len(Xs)))
-            return Xs[:-n_val], ys[:-n_val], Xs[-n_val:], ys[-n_val:]
+            return Xs[:-n_val], ys[:-n_val], Xs[-n_val:], ys[-n_val:], 0
         n = len(Xs[-1])
         n_val = round(self.validation_fraction * n)
         if n_val < min_len or n - n_val < min_len:
             # Too short to split: no validation selection.
-            return Xs, ys, None, None
+            return Xs, ys, None, None, 0
         head = [*Xs[:-1], Xs[-1][:-n_val]]
         yhead = [*ys[:-1], ys[-1][:-n_val]]
-        return head, yhead, [Xs[-1][-n_val:]], [ys[-1][-n_val:]]
+        return head, yhead, [Xs[-1][-n_val:]], [ys[-1][-n_val:]], n - n_val
 
     def _n_restarts(self) -> int:
         """Number of training runs from different random starts."""

@@ -49,6 +49,13 @@ class _Data:
     #: Initial states of the sequences (the ISSM's), or None: from the
     #: history rows.
     X0: np.ndarray | None = None
+    #: Leading modelled rows of every sequence that are run but never judged:
+    #: the training part a held-out tail continues.
+    lead: int = 0
+    #: A held-out tail as the continuation of its record (the whole record,
+    #: ``lead`` set to the training part), or None; see
+    #: :func:`sysid_nn._engine._selection.linear_candidate`.
+    continuation: _Data | None = None
 
     @property
     def modelled(self) -> np.ndarray:
@@ -62,8 +69,10 @@ class _Data:
 
     @property
     def judged(self) -> np.ndarray:
-        """Modelled rows that count in a validation loss (after the burn-in)."""
-        rows = [np.arange(a + self.h + self.burn, b) for a, b in pairwise(self.starts)]
+        """Modelled rows that count in a validation loss (after the burn-in
+        and the lead)."""
+        skip = max(self.burn, self.lead)
+        rows = [np.arange(a + self.h + skip, b) for a, b in pairwise(self.starts)]
         return np.concatenate(rows)
 
 
