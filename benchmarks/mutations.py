@@ -41,8 +41,8 @@ MUTATIONS = (
     Mutation(
         "burn-in",
         "sysid_nn/_records/_data.py",
-        "np.arange(a + self.h + self.burn, b)",
-        "np.arange(a + self.h, b)",
+        "skip = max(self.burn, self.lead)",
+        "skip = self.lead",
         (f"{POLICY}::test_validation_score_leaves_out_the_burn_in_rows",),
     ),
     Mutation(
@@ -186,6 +186,46 @@ MUTATIONS = (
         (
             "tests/test_order.py::"
             "test_short_record_order_kept_where_the_evidence_gains_little",
+        ),
+    ),
+    Mutation(
+        "continuation judged over the training part too",
+        "sysid_nn/_records/_data.py",
+        "skip = max(self.burn, self.lead)",
+        "skip = self.burn",
+        (
+            "tests/test_selection.py::"
+            "test_short_tail_of_a_record_at_rest_is_judged_as_its_continuation",
+        ),
+    ),
+    Mutation(
+        "continuation never",
+        "sysid_nn/_engine/_selection.py",
+        "and _START_MEMORY < start_memory(lin, run.w, val) < 1.0",
+        "and _START_MEMORY < start_memory(lin, run.w, val) < 0.0",
+        (
+            "tests/test_selection.py::"
+            "test_short_tail_of_a_record_at_rest_is_judged_as_its_continuation",
+        ),
+    ),
+    Mutation(
+        "continuation of records that start in motion",
+        "sysid_nn/_engine/_selection.py",
+        "    return bool(np.all(np.abs(heads - rest) <= _AT_REST))",
+        "    return True",
+        (
+            "tests/test_selection.py::"
+            "test_short_tail_of_a_record_at_rest_is_judged_as_its_continuation",
+        ),
+    ),
+    Mutation(
+        "continuation of tails the start's response leaves",
+        "sysid_nn/_engine/_selection.py",
+        "and _START_MEMORY < start_memory(lin, run.w, val) < 1.0",
+        "and 0.0 <= start_memory(lin, run.w, val) < 1.0",
+        (
+            "tests/test_selection.py::"
+            "test_validation_record_from_rest_judges_as_the_tail_within_the_record",
         ),
     ),
 )
