@@ -35,10 +35,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import _protocol as P  # noqa: E402
+import _protocol as P
 
-from sysid_nn import HystereticOscillator, ISSMRegressor, TDLRegressor  # noqa: E402
-from sysid_nn.metrics import nrmse  # noqa: E402
+from sysid_nn import HystereticOscillator, ISSMRegressor, TDLRegressor
+from sysid_nn.metrics import nrmse
 
 SEEDS = (0, 1, 2, 3, 4)
 MODELS = {"TDLRegressor()": TDLRegressor, "ISSMRegressor()": ISSMRegressor}
@@ -70,7 +70,9 @@ def rows() -> list[dict]:
                     warnings.simplefilter("ignore")
                     model = make(random_state=seed).fit(X, y)
                 cpu = time.process_time() - t0
-                unseen = [_score(model, a, b) for a, b in zip(X_new, y_new)]
+                unseen = [
+                    _score(model, a, b) for a, b in zip(X_new, y_new, strict=True)
+                ]
                 row = {
                     "case": case,
                     "model": label,

@@ -31,8 +31,8 @@ Systems (every fit with the defaults and ``random_state`` 0-2):
 
 Noise: white, 0.1 %, 1 % and 3 % of each output's standard deviation.
 
-Run: ``python benchmarks/bench_oracle.py [out.md]`` (about 10 minutes on two
-cores); results in ``results_oracle.md``.
+Run: ``python benchmarks/bench_oracle.py [out.md]`` (about 4 minutes);
+results in ``results_oracle.md``.
 """
 
 from __future__ import annotations
@@ -48,10 +48,10 @@ from scipy.signal import lfilter
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import _protocol as P  # noqa: E402
-from bench_linear import chain  # noqa: E402
+import _protocol as P
+from bench_linear import chain
 
-from sysid_nn import ISSMRegressor, TDLRegressor  # noqa: E402
+from sysid_nn import ISSMRegressor, TDLRegressor
 
 LEVELS = (0.001, 0.01, 0.03)
 SEEDS = (0, 1, 2)
@@ -102,14 +102,18 @@ def _fit(make, records, **params):
 def free_run_mse(est, X, y) -> float:
     """Mean squared error of the free runs from rest over the records."""
     with np.errstate(all="ignore"):
-        err = np.concatenate([est.simulate(Xi) - yi for Xi, yi in zip(X, y)])
+        err = np.concatenate(
+            [est.simulate(Xi) - yi for Xi, yi in zip(X, y, strict=True)]
+        )
     value = float(np.mean(err**2))
     return value if np.isfinite(value) else np.inf
 
 
 def test_nrmse(est, test) -> float:
     with np.errstate(all="ignore"):
-        scores = [P.record_nrmse(y, est.simulate(X)) for X, y in zip(*test)]
+        scores = [
+            P.record_nrmse(y, est.simulate(X)) for X, y in zip(*test, strict=True)
+        ]
     return float(np.median(np.nan_to_num(scores, nan=np.inf)))
 
 
@@ -118,8 +122,8 @@ def rows_of(system: str) -> list[dict]:
     rows = []
     for name, make in MODELS.items():
         for seed in SEEDS:
-            params = dict(random_state=seed, n_jobs=2)
-            ref, ref_cpu = _fit(make, clean, **params)
+            params = dict(random_state=seed)
+            ref, _ = _fit(make, clean, **params)
             sched = None
             if name == "TDL":
                 sched, _ = _fit(make, clean, shooting="free", **params)
@@ -161,8 +165,7 @@ def report(rows: list[dict], wall: float) -> str:
         "",
         "Command: `python benchmarks/bench_oracle.py` "
         f"(wall time {wall / 60:.1f} min; fit CPU time "
-        f"{_stats([r['cpu'] for r in rows])} s in the main process, the "
-        "restarts run in two worker processes; 1-minute load "
+        f"{_stats([r['cpu'] for r in rows])} s, one core; 1-minute load "
         f"{min(r['load'] for r in rows):.1f}-{max(r['load'] for r in rows):.1f} "
         "on 2 cores).",
         "",
