@@ -215,7 +215,7 @@ MUTATIONS = (
         "    return True",
         (
             "tests/test_selection.py::"
-            "test_short_tail_of_a_record_at_rest_is_judged_as_its_continuation",
+            "test_tail_is_judged_as_its_records_continuation_only_where_needed",
         ),
     ),
     Mutation(
@@ -225,7 +225,7 @@ MUTATIONS = (
         "and 0.0 <= start_memory(lin, run.w, val) < 1.0",
         (
             "tests/test_selection.py::"
-            "test_validation_record_from_rest_judges_as_the_tail_within_the_record",
+            "test_tail_is_judged_as_its_records_continuation_only_where_needed",
         ),
     ),
 )
