@@ -174,6 +174,13 @@ def summary(values) -> dict:
     }
 
 
+def median_range(values, digits: int = 3) -> str:
+    """``"median (min - max)"`` of ``values``, to ``digits`` significant digits."""
+    v = np.asarray(values, dtype=float)
+    f = f"{{:.{digits}g}}"
+    return f"{f.format(np.median(v))} ({f.format(v.min())} - {f.format(v.max())})"
+
+
 def simulate_from_measured(model, X, y, k0: int, p: int, filtered: bool = False):
     """Free run started at sample ``k0`` from the measured outputs before it.
 

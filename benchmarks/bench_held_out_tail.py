@@ -90,11 +90,6 @@ def rows() -> list[dict]:
     return out
 
 
-def _stats(values) -> str:
-    v = np.asarray(values, dtype=float)
-    return f"{np.median(v):.3g} ({v.min():.3g} - {v.max():.3g})"
-
-
 def report(found: list[dict], wall: float) -> str:
     lines = [
         "# One record, its tail held out",
@@ -114,13 +109,13 @@ def report(found: list[dict], wall: float) -> str:
         for label in MODELS:
             sel = [r for r in found if (r["case"], r["model"]) == (case, label)]
             lines.append(
-                f"| {case} | {label} | {_stats([r['own'] for r in sel])} | "
-                f"{_stats([r['unseen'] for r in sel])} | "
-                f"{_stats([r['worst'] for r in sel])} | "
+                f"| {case} | {label} | {P.median_range([r['own'] for r in sel])} | "
+                f"{P.median_range([r['unseen'] for r in sel])} | "
+                f"{P.median_range([r['worst'] for r in sel])} | "
                 f"{sum(not np.isfinite(r['worst']) for r in sel)} of {len(sel)} | "
                 f"{sum(bool(r['continued']) for r in sel)} of {len(sel)} | "
                 f"{sum(r['selected'] == 'linear' for r in sel)} of {len(sel)} | "
-                f"{_stats([r['cpu'] for r in sel])} |"
+                f"{P.median_range([r['cpu'] for r in sel])} |"
             )
     return "\n".join(lines) + "\n"
 

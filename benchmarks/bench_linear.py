@@ -30,6 +30,7 @@ import sys
 import time
 import warnings
 
+import _protocol as P
 import numpy as np
 from scipy.signal import cont2discrete, lfilter
 
@@ -61,6 +62,10 @@ def chain(freqs, zeta) -> tuple[np.ndarray, np.ndarray]:
         b_all = np.polyadd(np.polymul(b_all, ad), np.polymul(bd, a_all))
         a_all = np.polymul(a_all, ad)
     return b_all, a_all
+
+
+def _median_range(values) -> str:
+    return P.median_range(values, 4)
 
 
 def arx_free_run(u, y, na, nb, u_test) -> np.ndarray:
@@ -169,11 +174,6 @@ def oscillator_rows() -> list[dict]:
     return rows
 
 
-def _stats(values) -> str:
-    v = np.asarray(values, dtype=float)
-    return f"{np.median(v):.4g} ({v.min():.4g} - {v.max():.4g})"
-
-
 def main(out: str | None = None) -> int:
     start = time.time()
     chains = linear_chain_rows()
@@ -187,17 +187,17 @@ def main(out: str | None = None) -> int:
             sel = [r for r in chains if r["system"] == name and r["noise"] == noise]
             ratio = [r["lin"] / r["arx"] for r in sel]
             lines.append(
-                f"| {name} | {noise:.0%} | {_stats([r['arx'] for r in sel])} | "
-                f"{_stats([r['lin'] for r in sel])} | {_stats(ratio)} | "
-                f"{_stats([r['tdl'] for r in sel])} | "
-                f"{_stats([r['issm'] for r in sel])} |"
+                f"| {name} | {noise:.0%} | {_median_range([r['arx'] for r in sel])} | "
+                f"{_median_range([r['lin'] for r in sel])} | {_median_range(ratio)} | "
+                f"{_median_range([r['tdl'] for r in sel])} | "
+                f"{_median_range([r['issm'] for r in sel])} |"
             )
     lines += ["", "| oscillator records | TDL() | ISSM() |", "|---|---|---|"]
     for n_rec in (1, 3):
         sel = [r for r in osc if r["records"] == n_rec]
         lines.append(
-            f"| {n_rec} | {_stats([r['tdl'] for r in sel])} | "
-            f"{_stats([r['issm'] for r in sel])} |"
+            f"| {n_rec} | {_median_range([r['tdl'] for r in sel])} | "
+            f"{_median_range([r['issm'] for r in sel])} |"
         )
     lines.append(f"\nwall time {time.time() - start:.0f} s")
     text = "\n".join(lines)

@@ -153,19 +153,13 @@ def rows_of(system: str) -> list[dict]:
     return rows
 
 
-def _stats(values, digits=3) -> str:
-    v = np.asarray(values, dtype=float)
-    f = f"{{:.{digits}g}}"
-    return f"{f.format(np.median(v))} ({f.format(v.min())}-{f.format(v.max())})"
-
-
 def report(rows: list[dict], wall: float) -> str:
     lines = [
         "# Oracle comparison",
         "",
         "Command: `python benchmarks/bench_oracle.py` "
         f"(wall time {wall / 60:.1f} min; fit CPU time "
-        f"{_stats([r['cpu'] for r in rows])} s, one core; 1-minute load "
+        f"{P.median_range([r['cpu'] for r in rows])} s, one core; 1-minute load "
         f"{min(r['load'] for r in rows):.1f}-{max(r['load'] for r in rows):.1f} "
         "on 2 cores).",
         "",
@@ -192,10 +186,10 @@ def report(rows: list[dict], wall: float) -> str:
                 shooting = sorted({r["shooting"] for r in sel})
                 lines.append(
                     f"| {system} | {name} | {level:.1%} | "
-                    f"{_stats([r['ratio'] for r in sel])} | "
-                    f"{_stats([r['test'] for r in sel])} | "
-                    f"{_stats([r['clean_test'] for r in sel])} | "
-                    f"{_stats(sched) if np.all(np.isfinite(sched)) else '-'} | "
+                    f"{P.median_range([r['ratio'] for r in sel])} | "
+                    f"{P.median_range([r['test'] for r in sel])} | "
+                    f"{P.median_range([r['clean_test'] for r in sel])} | "
+                    f"{P.median_range(sched) if np.all(np.isfinite(sched)) else '-'} | "
                     f"{', '.join(shooting)} |"
                 )
     return "\n".join(lines) + "\n"
