@@ -189,6 +189,16 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "wild runs beyond the training range kept",
+        "sysid_nn/_engine/_selection.py",
+        "_AMPLITUDE_PEAK = 5.0",
+        "_AMPLITUDE_PEAK = np.inf",
+        (
+            "tests/test_selection.py::"
+            "test_restart_that_diverges_beyond_the_training_range_is_not_chosen",
+        ),
+    ),
+    Mutation(
         "continuation judged over the training part too",
         "sysid_nn/_records/_data.py",
         "skip = max(self.burn, self.lead)",

@@ -87,7 +87,8 @@ restart_losses_ : ndarray
     candidate only where this is no worse than ``linear_loss_``.
 restart_bounded_ : ndarray of bool
     Whether each restart's free run stays bounded when the training
-    excitation is scaled to twice its amplitude about its mean, and passes
+    excitation is scaled to twice its amplitude about its mean (within five
+    times the training outputs' largest standardised value), and passes
     the constant-input check (``restart_excursions_`` at most 1); the
     others are candidates only where none passes.
 restart_excursions_ : ndarray
