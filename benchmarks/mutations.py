@@ -211,8 +211,8 @@ MUTATIONS = (
     Mutation(
         "continuation never",
         "sysid_nn/_engine/_selection.py",
-        "and _START_MEMORY < start_memory(lin, run.w, val) < 1.0",
-        "and _START_MEMORY < start_memory(lin, run.w, val) < 0.0",
+        "and _START_MEMORY < _start_memory(response, val) < 1.0",
+        "and _START_MEMORY < _start_memory(response, val) < 0.0",
         (
             "tests/test_selection.py::"
             "test_short_tail_of_a_record_at_rest_is_judged_as_its_continuation",
@@ -231,8 +231,8 @@ MUTATIONS = (
     Mutation(
         "continuation of tails the start's response leaves",
         "sysid_nn/_engine/_selection.py",
-        "and _START_MEMORY < start_memory(lin, run.w, val) < 1.0",
-        "and 0.0 <= start_memory(lin, run.w, val) < 1.0",
+        "and _START_MEMORY < _start_memory(response, val) < 1.0",
+        "and 0.0 <= _start_memory(response, val) < 1.0",
         (
             "tests/test_selection.py::"
             "test_tail_is_judged_as_its_records_continuation_only_where_needed",

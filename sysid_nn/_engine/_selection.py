@@ -33,7 +33,7 @@ import numpy as np
 
 from sysid_nn._engine._state_estimation import _segments
 from sysid_nn._exceptions import user_stacklevel
-from sysid_nn._records._data import _FREE_RUN
+from sysid_nn._records._data import _FREE_RUN, _Data
 
 #: A validation record simulated from rest is judged after the linear
 #: model's response to its initial state has fallen below this share of
@@ -102,8 +102,8 @@ class LinearCandidate:
     ``k`` is the restart whose linear start it was trained from; ``burn``
     and ``start_window`` how validation records are judged (the ``_Data``
     fields of those names), set by the linear model's response;
-    ``continued`` whether a held-out tail is judged as the continuation of
-    its record (the validation records' ``continuation``).
+    ``continuation`` the record a held-out tail is judged in, or None (see
+    :func:`continuation`).
     """
 
     run: object
@@ -111,7 +111,7 @@ class LinearCandidate:
     k: int = 0
     burn: int = 0
     start_window: int = 0
-    continued: bool = False
+    continuation: _Data | None = None
 
 
 def _linear_copy(est):
@@ -169,9 +169,10 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
     ]
     run, k = min(fits, key=lambda fit: fit[0].criterion)  # the first of equals
     burn = start_window = 0
-    continued = False
+    whole = None
     if val is not None:
-        burn, settled = burn_in(lin, run.w, val)
+        response = _start_response(lin, run.w, val)
+        burn, settled = _burn_in(response, val)
         seg = lin._final_segment()  # judged as the restarts are
         loss = None
         if not settled and est._estimates_start():
@@ -189,19 +190,21 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
             if fitted < _FITTED_START_GAIN * max(at_rest, np.finfo(float).tiny):
                 start_window = burn = window
                 loss = fitted  # ``val`` judged so
-        whole = val.continuation
         if (
             loss is None
             and not settled
-            and whole is not None
-            and _START_MEMORY < start_memory(lin, run.w, val) < 1.0
-            and starts_at_rest(est, whole)
+            and val.tail
+            and _START_MEMORY < _start_memory(response, val) < 1.0
         ):
             # From rest, the tail shows mostly the response to its wrong
-            # start, which outlasts it; its record starts at rest, so the
+            # start, which outlasts it; where its record starts at rest, the
             # free run over the whole record is a run from rest.
-            continued, burn = True, 0
-            loss = validation_loss(lin, run.w, whole, seg)
+            whole = continuation(train, val)
+            if starts_at_rest(est, whole):
+                burn = 0
+                loss = validation_loss(lin, run.w, whole, seg)
+            else:
+                whole = None
         if loss is None:
             loss = validation_loss(lin, run.w, replace(val, burn=burn), seg)
         run = replace(run, criterion=loss, val_loss=loss)
@@ -211,7 +214,7 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
         k=k,
         burn=burn,
         start_window=start_window,
-        continued=continued,
+        continuation=whole,
     )
 
 
@@ -249,7 +252,11 @@ def burn_in(est, w: np.ndarray, data) -> tuple[int, bool]:
     as the oscillator's, were given half a record of burn-in by a rule
     that compared the burn-in with the rest).
     """
-    response = _start_response(est, w, data)
+    return _burn_in(_start_response(est, w, data), data)
+
+
+def _burn_in(response, data) -> tuple[int, bool]:
+    """:func:`burn_in` from the response of :func:`_start_response`."""
     cap = _burn_cap(data)
     if response is None:
         return cap, False
@@ -285,15 +292,14 @@ def _start_response(est, w: np.ndarray, data):
     return np.abs(runs[1][0] - runs[0][0]).max(axis=1), runs[0][0]
 
 
-def start_memory(est, w: np.ndarray, data) -> float:
-    """The share of ``w``'s response to its initial outputs left at the end.
+def _start_memory(response, data) -> float:
+    """The share of a response to the initial outputs left at the end.
 
-    The RMS of the response (see :func:`_start_response`) over the last
-    fifth of every sequence over its RMS over the first fifth, the largest
-    over the sequences; ``inf`` where a run diverged. Below 1 the response
-    decays; near 1 the sequences are short against its decay.
+    The RMS of the response (of :func:`_start_response`) over the last
+    fifth of every sequence of ``data`` over its RMS over the first fifth,
+    the largest over the sequences; ``inf`` where a run diverged. Below 1
+    the response decays; near 1 the sequences are short against its decay.
     """
-    response = _start_response(est, w, data)
     if response is None:
         return np.inf
     gap = response[0]
@@ -304,6 +310,23 @@ def start_memory(est, w: np.ndarray, data) -> float:
         first = np.sqrt(np.mean(g[:k] ** 2))
         shares.append(np.sqrt(np.mean(g[-k:] ** 2)) / max(first, 1e-12))
     return float(max(shares))
+
+
+def continuation(train, val) -> _Data:
+    """The held-out tail ``val`` judged in its record: one sequence.
+
+    ``val`` (``tail`` set) is the tail of the last sequence of ``train``;
+    the record is that sequence, its history rows included, with the
+    tail's modelled rows after it, and its training part (``lead``) is run
+    but not judged.
+    """
+    a, b = train.starts[-2], train.starts[-1]
+    Y = np.concatenate([train.Y[a:b], val.Y[val.h :]])
+    U = np.concatenate([train.U[a:b], val.U[val.h :]])
+    return _Data(
+        Y=Y, U=U, starts=np.array([0, len(Y)], dtype=np.int64), h=train.h,
+        lead=int(b - a - train.h),
+    )  # fmt: skip
 
 
 def starts_at_rest(est, data) -> bool:

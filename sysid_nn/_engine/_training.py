@@ -259,8 +259,8 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         est, train_data, val, lambda k: _Restart(k, int(seeds[0]))
     )
     if linear is not None and val is not None:
-        if linear.continued:
-            val = val.continuation
+        if linear.continuation is not None:
+            val = linear.continuation
         val = replace(val, burn=linear.burn, start_window=linear.start_window)
     restarts = [_Restart(k, seed) for k, seed in enumerate(seeds)]
     cut = HALVING_AFTER if halving else n_stages

@@ -296,12 +296,12 @@ class _RecurrentRegressorBase(
         Xc, yc = np.concatenate(Xs), np.concatenate(ys)
         self._x_mean, self._x_scale = _mean_scale(Xc, "X")
         self._y_mean, self._y_scale = _mean_scale(yc, "y")
-        train_data, val = self._stack_fit_records(Xs, ys, Xv, yv, lead)
+        train_data, val = self._stack_fit_records(Xs, ys, Xv, yv, lead > 0)
         with _single_threaded_blas():
             self._choose_order(train_data, val)
         if self._history_length() != train_data.h:
             # The chosen lags reach further back than the provisional ones.
-            train_data, val = self._stack_fit_records(Xs, ys, Xv, yv, lead)
+            train_data, val = self._stack_fit_records(Xs, ys, Xv, yv, lead > 0)
         self._bound = _DIVERGENCE_FACTOR * max(1.0, np.abs(train_data.Y).max())
         self._diagnose(train_data)
         # The initial fit and the selection use BLAS too; see _single_threaded_blas.
@@ -346,22 +346,16 @@ class _RecurrentRegressorBase(
             )
         return self
 
-    def _stack_fit_records(self, Xs, ys, Xv, yv, lead: int = 0):
+    def _stack_fit_records(self, Xs, ys, Xv, yv, tail: bool = False):
         """The training and validation records stacked.
 
-        ``lead``: the validation record is the tail of the last training
-        record after its first ``lead`` samples; the whole record is kept
-        as the tail's ``continuation`` (see ``_split_validation``).
+        ``tail``: the validation record is the tail of the last training
+        record (see ``_split_validation``).
         """
         train = self._stack(Xs, ys)
         val = self._stack(Xv, yv) if Xv is not None else None
-        if lead:
-            whole = self._stack(
-                [np.concatenate([Xs[-1], Xv[0]])], [np.concatenate([ys[-1], yv[0]])]
-            )
-            val = dataclasses.replace(
-                val, continuation=dataclasses.replace(whole, lead=lead)
-            )
+        if tail:
+            val = dataclasses.replace(val, tail=True)
         return train, val
 
     def _choose_order(self, train: _Data, val: _Data | None) -> None:

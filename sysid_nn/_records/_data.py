@@ -52,10 +52,9 @@ class _Data:
     #: Leading modelled rows of every sequence that are run but never judged:
     #: the training part a held-out tail continues.
     lead: int = 0
-    #: A held-out tail as the continuation of its record (the whole record,
-    #: ``lead`` set to the training part), or None; see
-    #: :func:`sysid_nn._engine._selection.linear_candidate`.
-    continuation: _Data | None = None
+    #: Whether the one sequence is the held-out tail of the training records'
+    #: last sequence (see :func:`sysid_nn._engine._selection.continuation`).
+    tail: bool = False
 
     @property
     def modelled(self) -> np.ndarray:
