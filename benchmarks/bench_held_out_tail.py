@@ -28,7 +28,6 @@ from __future__ import annotations
 import os
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -65,11 +64,7 @@ def rows() -> list[dict]:
     for case, (X, y, X_new, y_new) in records().items():
         for label, make in MODELS.items():
             for seed in SEEDS:
-                t0 = time.process_time()
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    model = make(random_state=seed).fit(X, y)
-                cpu = time.process_time() - t0
+                model, cpu = P.timed_fit(make(random_state=seed), X, y)
                 unseen = [
                     _score(model, a, b) for a, b in zip(X_new, y_new, strict=True)
                 ]

@@ -40,7 +40,6 @@ from __future__ import annotations
 import os
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -91,12 +90,7 @@ SYSTEMS = {"oscillator, P1": oscillator, "two-mode chain": two_mode_chain}
 
 
 def _fit(make, records, **params):
-    X, y, X_val, y_val = records
-    t0 = time.process_time()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        est = make(**params).fit(X, y, X_val=X_val, y_val=y_val)
-    return est, time.process_time() - t0
+    return P.timed_fit(make(**params), *records)
 
 
 def free_run_mse(est, X, y) -> float:
