@@ -238,6 +238,27 @@ MUTATIONS = (
             "test_tail_is_judged_as_its_records_continuation_only_where_needed",
         ),
     ),
+    Mutation(
+        "arx rows with rest lags",
+        "sysid_nn/_estimators/_tdl.py",
+        "        rows = data.measured_rows(data.h)\n",
+        "        rows = data.modelled\n",
+        ("tests/test_tdl.py::test_arx_start_regresses_only_on_measured_lags",),
+    ),
+    Mutation(
+        "linear model judged from rest",
+        "sysid_nn/_engine/_training.py",
+        "    elif val is not None and not est._hidden_layers():",
+        "    elif False:",
+        (f"{POLICY}::test_linear_model_is_judged_as_the_networks_are",),
+    ),
+    Mutation(
+        "run ends worse than its start",
+        "sysid_nn/_engine/_training.py",
+        "        if start_loss < loss or not np.isfinite(loss):",
+        "        if False:",
+        (f"{POLICY}::test_run_without_validation_ends_no_worse_than_its_start",),
+    ),
 )
 
 

@@ -92,11 +92,7 @@ def arx(est, data: _Data, lags: int):
     Returns ``(A_list, B_list, c, rows)``.
     """
     p, nk = est.n_outputs_, est.input_delay
-    rows = []
-    for a, b in pairwise(data.starts):
-        first = a + data.h + max(lags, nk + lags - 1)
-        rows.append(np.arange(first, b))
-    rows = np.concatenate(rows)
+    rows = data.measured_rows(max(lags, nk + lags - 1))
     n_reg = lags * (p + est.n_features_in_)
     theta, _ = least_squares.solve(
         (with_intercept(arx_regressors(est, data, rows[s], lags)), data.Y[rows[s]])

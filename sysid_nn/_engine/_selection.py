@@ -171,42 +171,7 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
     burn = start_window = 0
     whole = None
     if val is not None:
-        response = _start_response(lin, run.w, val)
-        burn, settled = _burn_in(response, val)
-        seg = lin._final_segment()  # judged as the restarts are
-        loss = None
-        if not settled and est._estimates_start():
-            # The initial state is not forgotten within the record (an
-            # integrating plant): where the linear model's run fits the rest
-            # of the records far better from states fitted to their first
-            # samples, validation runs start so (records that start at rest
-            # need not: the hysteretic oscillator's linear models drift and
-            # never forget their start either).
-            window = min(_START_WINDOW, _burn_cap(val))
-            fitted = validation_loss(
-                lin, run.w, replace(val, start_window=window, burn=window), seg
-            )
-            at_rest = validation_loss(lin, run.w, replace(val, burn=window), seg)
-            if fitted < _FITTED_START_GAIN * max(at_rest, np.finfo(float).tiny):
-                start_window = burn = window
-                loss = fitted  # ``val`` judged so
-        if (
-            loss is None
-            and not settled
-            and val.tail
-            and _START_MEMORY < _start_memory(response, val) < 1.0
-        ):
-            # From rest, the tail shows mostly the response to its wrong
-            # start, which outlasts it; where its record starts at rest, the
-            # free run over the whole record is a run from rest.
-            whole = continuation(train, val)
-            if starts_at_rest(est, whole):
-                burn = 0
-                loss = validation_loss(lin, run.w, whole, seg)
-            else:
-                whole = None
-        if loss is None:
-            loss = validation_loss(lin, run.w, replace(val, burn=burn), seg)
+        burn, start_window, whole, loss = judgement(est, lin, run.w, train, val)
         run = replace(run, criterion=loss, val_loss=loss)
     return LinearCandidate(
         run=run,
@@ -216,6 +181,42 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
         start_window=start_window,
         continuation=whole,
     )
+
+
+def judgement(est, lin, w: np.ndarray, train, val) -> tuple:
+    """How ``val`` is judged, from the linear model ``lin`` with weights ``w``.
+
+    Returns ``(burn, start_window, continuation, loss)``: the burn-in
+    (:func:`burn_in`), the fitted-start window (0: from rest), the record a
+    held-out tail is judged in (None: on its own) and ``w``'s validation
+    loss judged so. ``est`` is the estimator being fitted (``lin`` may be
+    ``est`` itself).
+    """
+    response = _start_response(lin, w, val)
+    burn, settled = _burn_in(response, val)
+    seg = lin._final_segment()  # judged as the restarts are
+    if not settled and est._estimates_start():
+        # The initial state is not forgotten within the record (an
+        # integrating plant, a lightly damped structure): where the linear
+        # model's run fits the rest of the records far better from states
+        # fitted to their first samples, validation runs start so (records
+        # that start at rest need not: the hysteretic oscillator's linear
+        # models drift and never forget their start either).
+        window = min(_START_WINDOW, _burn_cap(val))
+        fitted = validation_loss(
+            lin, w, replace(val, start_window=window, burn=window), seg
+        )
+        at_rest = validation_loss(lin, w, replace(val, burn=window), seg)
+        if fitted < _FITTED_START_GAIN * max(at_rest, np.finfo(float).tiny):
+            return window, window, None, fitted  # ``val`` judged so
+    if not settled and val.tail and _START_MEMORY < _start_memory(response, val) < 1.0:
+        # From rest, the tail shows mostly the response to its wrong
+        # start, which outlasts it; where its record starts at rest, the
+        # free run over the whole record is a run from rest.
+        whole = continuation(train, val)
+        if starts_at_rest(est, whole):
+            return 0, 0, whole, validation_loss(lin, w, whole, seg)
+    return burn, 0, None, validation_loss(lin, w, replace(val, burn=burn), seg)
 
 
 def embed_linear(est, w_lin: np.ndarray) -> np.ndarray:

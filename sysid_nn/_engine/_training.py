@@ -162,7 +162,7 @@ class _Tracker:
 
     def __init__(self, est, val: _Data | None, seg: int, w0: np.ndarray):
         self.est, self.val, self.seg = est, val, seg
-        self.best_w = w0.copy()
+        self.best_w = self.start_w = w0.copy()
         self.best_loss = np.inf
         self.best_stage = 0
         self.stage_index = 0
@@ -262,6 +262,12 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         if linear.continuation is not None:
             val = linear.continuation
         val = replace(val, burn=linear.burn, start_window=linear.start_window)
+    elif val is not None and not est._hidden_layers():
+        # A linear model is judged as the networks are, from its own start
+        # (the closed-form fit).
+        w0 = est._initial_params(np.random.RandomState(0))
+        burn, window, whole, _ = _selection.judgement(est, est, w0, train_data, val)
+        val = replace(val if whole is None else whole, burn=burn, start_window=window)
     restarts = [_Restart(k, seed) for k, seed in enumerate(seeds)]
     cut = HALVING_AFTER if halving else n_stages
     results = run_restarts(est, train_data, val, restarts, cut)
@@ -457,12 +463,22 @@ def fit_stages(est, train_data, val, restart, stop):
         )
     tracker.stage = None
     restart.w, restart.stage = w, max(stop, restart.stage)
+    best_stage = len(restart.history) - 1
     if val is not None:
         w = tracker.best_w
         val_loss = tracker.best_loss
+        best_stage = tracker.best_stage
     else:
         val_loss = np.nan
-    loss = _Objective(est, train_data, final_seg, mask, n_res).loss(w)
+    final = _Objective(est, train_data, final_seg, mask, n_res)
+    loss = final.loss(w)
+    if val is None:
+        # Judged on the training records alone, a run ends no worse than
+        # where it started (a linear start: the closed-form fit that the
+        # stages could not improve or whose free run they could not run).
+        start_loss = final.loss(tracker.start_w)
+        if start_loss < loss or not np.isfinite(loss):
+            w, loss, best_stage = tracker.start_w.copy(), start_loss, 0
     criterion = val_loss if val is not None else loss
     run = _Run(
         w=w,
@@ -472,9 +488,7 @@ def fit_stages(est, train_data, val, restart, stop):
         n_iter=restart.n_iter,
         converged=restart.converged,
         history=list(restart.history),
-        best_stage=(
-            tracker.best_stage if val is not None else len(restart.history) - 1
-        ),
+        best_stage=best_stage,
     )
     return restart, run
 

@@ -380,9 +380,10 @@ such, default=None
     def _initial_guess(self, y0):
         return np.tile(y0, (self.output_lags_, 1))
 
-    def _regressors(self, data: _Data) -> np.ndarray:
-        """One-step regressor matrix ``phi`` of the modelled rows (measured y)."""
-        rows = data.modelled
+    def _regressors(self, data: _Data, rows: np.ndarray | None = None) -> np.ndarray:
+        """One-step regressor matrix ``phi`` of ``rows`` (by default the
+        modelled rows; measured y)."""
+        rows = data.modelled if rows is None else rows
         na, nb, nk = self.output_lags_, self.input_lags_, self.input_delay
         blocks = [data.Y[rows - i] for i in range(1, na + 1)]
         blocks += [data.U[rows - nk - i] for i in range(nb)]
@@ -468,7 +469,15 @@ such, default=None
         self._sizes_ = self._sizes()
         self._act = ACTIVATIONS[self.activation]
         longest = int(np.max(np.diff(data.starts))) - data.h
-        self._arx = self._stable_arx(phi @ S.T, data.Y[data.modelled], longest)
+        # Least squares on the rows whose lags are all measured, as the
+        # ISSM's ARX start: on a record that starts in motion, the rest
+        # state in the history rows biased the fit (a flexible arm's
+        # acceleration, 614 samples: spectral radius 1.017 against 0.998).
+        rows = data.measured_rows(data.h)
+        if len(rows) <= n_reg:  # too short: every modelled row
+            rows = data.modelled
+        arx_phi = self._regressors(data, rows)
+        self._arx = self._stable_arx(arx_phi @ S.T, data.Y[rows], longest)
 
     def _stable_arx(self, Z: np.ndarray, target: np.ndarray, n: int) -> np.ndarray:
         """Least-squares ARX fit (with intercept) in network coordinates, stable.

@@ -66,6 +66,17 @@ class _Data:
             ]
         )
 
+    def measured_rows(self, reach: int) -> np.ndarray:
+        """Modelled rows whose ``reach`` previous rows are modelled too.
+
+        The rows a least-squares fit on lagged outputs and inputs can use:
+        the regressors of the first ``reach`` modelled rows of a sequence
+        read its history rows, which hold the rest state, not measurements
+        (a record that starts in motion would bias the fit).
+        """
+        rows = [np.arange(a + self.h + reach, b) for a, b in pairwise(self.starts)]
+        return np.concatenate(rows)
+
     @property
     def judged(self) -> np.ndarray:
         """Modelled rows that count in a validation loss (after the burn-in
