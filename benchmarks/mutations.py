@@ -259,6 +259,25 @@ MUTATIONS = (
         "        if False:",
         (f"{POLICY}::test_run_without_validation_ends_no_worse_than_its_start",),
     ),
+    Mutation(
+        "order compared from rest",
+        "sysid_nn/_engine/_order.py",
+        "and fitted**2 < _FITTED_START_GAIN * rest**2)",
+        "and False)",
+        (
+            "tests/test_order.py::"
+            "test_short_record_orders_compared_from_fitted_starts_where_needed",
+        ),
+    ),
+    Mutation(
+        "order compared from fitted starts",
+        "sysid_nn/_engine/_order.py",
+        "    return bool(np.isfinite(fitted) and",
+        "    return bool(True or",
+        (
+            "tests/test_order.py::test_short_record_order_kept_where_the_evidence_gains_little",
+        ),
+    ),
 )
 
 
