@@ -278,6 +278,47 @@ MUTATIONS = (
             "tests/test_order.py::test_short_record_order_kept_where_the_evidence_gains_little",
         ),
     ),
+    Mutation(
+        "no closed-form candidate",
+        "sysid_nn/_engine/_training.py",
+        "    if not est._hidden_layers():\n        # A linear model: its closed-form",
+        "    if False:\n        # A linear model: its closed-form",
+        (
+            f"{POLICY}::test_linear_model_fits_its_training_records_no_worse_than_least_squares",
+        ),
+    ),
+    Mutation(
+        "closed-form fit to low-passed records",
+        "sysid_nn/_estimators/_tdl.py",
+        "arx = self._arx if self._arx_measured is None else self._arx_measured",
+        "arx = self._arx",
+        (
+            f"{POLICY}::test_linear_model_fits_its_training_records_no_worse_than_least_squares",
+        ),
+    ),
+    Mutation(
+        "linear model not held to its closed-form fits",
+        "sysid_nn/_engine/_selection.py",
+        "        if val is not None and closed_form:",
+        "        if False:",
+        (
+            f"{POLICY}::test_linear_model_fits_its_training_records_no_worse_than_least_squares",
+        ),
+    ),
+    Mutation(
+        "linear candidate without its closed-form fits",
+        "sysid_nn/_engine/_selection.py",
+        "    fits += [(run, 0) for run in closed]\n",
+        "",
+        (f"{POLICY}::test_networks_linear_model_is_held_to_its_closed_form_fit",),
+    ),
+    Mutation(
+        "linear candidate not held to its closed-form fits",
+        "sysid_nn/_engine/_selection.py",
+        "    if val is not None and closed:",
+        "    if False:",
+        (f"{POLICY}::test_networks_linear_model_is_held_to_its_closed_form_fit",),
+    ),
 )
 
 

@@ -167,8 +167,8 @@ def test_refinement_reports_the_start_of_its_linear_model(monkeypatch):
 
     choose = _selection.choose
 
-    def refinement_wins(est, train, val, runs, linear):
-        _, _, bounded, excursions = choose(est, train, val, runs, linear)
+    def refinement_wins(est, train, val, runs, linear, closed_form=()):
+        _, _, bounded, excursions = choose(est, train, val, runs, linear, closed_form)
         return runs[-1], "restart", bounded, excursions
 
     monkeypatch.setattr(ISSMRegressor, "_fit_one", spy)

@@ -229,6 +229,9 @@ class Training:
     #: The index of the run that refined the linear model (None without one;
     #: see :func:`refine_linear`).
     refined: int | None = None
+    #: The indices of the runs that are closed-form fits of a linear model,
+    #: untrained (see :func:`sysid_nn._engine._selection.closed_form_runs`).
+    closed_form: list = field(default_factory=list)
     #: The validation records as they were judged (burn-in and fitted
     #: start set from the linear model), or None.
     validation: _Data | None = None
@@ -278,12 +281,20 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         for k, result in zip(kept, done, strict=True):
             results[k] = result
     runs = [run for _, run in results]
+    closed_form = []
+    if not est._hidden_layers():
+        # A linear model: its closed-form fits are candidates as they are.
+        fits = _selection.closed_form_runs(
+            est, train_data, val, lambda k: _Restart(k, int(seeds[0]))
+        )
+        closed_form = list(range(len(runs), len(runs) + len(fits)))
+        runs += fits
     refined = None
     if linear is not None:
         refined = len(runs)
         runs.append(refine_linear(est, train_data, val, linear, refined, refine_seed))
     best, chosen, selected, bounded, excursions = choose_restart(
-        est, train_data, val, runs, linear
+        est, train_data, val, runs, linear, closed_form
     )
     if not np.all(np.isfinite(chosen.w)):
         raise ValueError(
@@ -305,6 +316,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         bounded=bounded,
         excursions=excursions,
         refined=refined,
+        closed_form=closed_form,
         validation=val,
     )
 
@@ -338,7 +350,7 @@ def refine_linear(est, train_data, val, linear, k: int, seed: int) -> _Run:
     return refiner._fit_one(train_data, val, restart, n_stages)[1]
 
 
-def choose_restart(est, train_data, val, runs: list, linear):
+def choose_restart(est, train_data, val, runs: list, linear, closed_form=()):
     """The run whose weights ``fit`` returns: ``(index, run, selected,
     bounded, excursions)``, ``bounded`` whether each run's free run stays
     bounded, ``excursions`` its constant-input excursion over its bound.
@@ -351,7 +363,7 @@ def choose_restart(est, train_data, val, runs: list, linear):
     ``selected`` ``"linear"``). See :func:`sysid_nn._engine._selection.choose`.
     """
     chosen, selected, bounded, excursions = _selection.choose(
-        est, train_data, val, runs, linear
+        est, train_data, val, runs, linear, closed_form
     )
     index = next((k for k, r in enumerate(runs) if r is chosen), None)
     return index, chosen, selected, bounded, excursions
@@ -463,7 +475,7 @@ def fit_stages(est, train_data, val, restart, stop):
         )
     tracker.stage = None
     restart.w, restart.stage = w, max(stop, restart.stage)
-    best_stage = len(restart.history) - 1
+    best_stage = max(len(restart.history) - 1, 0)
     if val is not None:
         w = tracker.best_w
         val_loss = tracker.best_loss

@@ -404,6 +404,7 @@ class _RecurrentRegressorBase(
         self.n_restarts_ = len(result.runs)
         self.best_restart_ = result.chosen
         self.refined_restart_ = result.refined
+        self.closed_form_restarts_ = list(result.closed_form)
         self.selected_ = result.selected
         lin = None if result.linear is None else result.linear.run
         # The linear model in the network's own weights, for the
@@ -601,6 +602,13 @@ class _RecurrentRegressorBase(
         ``window`` modelled rows (see ``_estimates_start``): here the
         measured history rows already are the whole initial condition."""
         return data
+
+    def _closed_form_fits(self) -> list[np.ndarray]:
+        """Weights of a model without hidden layers fitted in closed form,
+        other than its linear starts (which the restarts start from and
+        validation judges already): candidates of the linear model as they
+        are, untrained (see :func:`~sysid_nn._engine._selection.linear_candidate`)."""
+        return []
 
     def _linear_start_restarts(self) -> list[int]:
         """One restart index per distinct linear start (see ``_fit_one``)."""

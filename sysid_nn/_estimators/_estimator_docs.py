@@ -111,9 +111,15 @@ refined_restart_ : int or None
     linear model (the last; None where the linear model is no candidate):
     it starts at the linear model with small hidden weights and runs the
     final stage of the schedule only, with five times ``max_iter``.
+closed_form_restarts_ : list of int
+    Indices in ``restart_scores_`` of the linear model's closed-form fits,
+    judged as they are, untrained (a model without hidden layers; empty
+    otherwise): the TDL's least-squares ARX fit to the measured records
+    where its start is fitted to low-passed ones (``shooting="free"``).
+    Their ``training_history_`` is empty.
 best_stage_ : int
     Training stage in which the chosen weights were seen (an index into
-    ``training_history_[best_restart_]``).
+    ``training_history_[best_restart_]``; 0 for a closed-form fit).
 training_history_ : list of list
     For each restart, one record per training stage it ran: ``segment``
     (length in samples; very large for the free run), ``n_iter``,

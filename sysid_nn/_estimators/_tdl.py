@@ -443,6 +443,7 @@ such, default=None
 
     def _prepare_structure(self, data: _Data, val: _Data | None = None) -> None:
         self._smooth_train = None
+        measured = data
         if self.shooting_ == "free":
             # The linear start and the lag scaling from the band where the
             # outputs clear the noise: at fine sampling the measured second
@@ -478,6 +479,14 @@ such, default=None
             rows = data.modelled
         arx_phi = self._regressors(data, rows)
         self._arx = self._stable_arx(arx_phi @ S.T, data.Y[rows], longest)
+        # The closed-form fit to the measured records themselves, where the
+        # start is fitted to low-passed ones (a candidate of the linear model).
+        self._arx_measured = None
+        if measured is not data:
+            arx_phi = self._regressors(measured, rows)
+            self._arx_measured = self._stable_arx(
+                arx_phi @ S.T, measured.Y[rows], longest
+            )
 
     def _stable_arx(self, Z: np.ndarray, target: np.ndarray, n: int) -> np.ndarray:
         """Least-squares ARX fit (with intercept) in network coordinates, stable.
@@ -517,10 +526,22 @@ such, default=None
         return float(np.max(np.abs(np.linalg.eigvals(C))))
 
     def _initial_params(self, rng):
+        return self._weights_at(self._arx, rng)
+
+    def _closed_form_fits(self) -> list[np.ndarray]:
+        # The least-squares ARX fit to the measured records (the start
+        # itself where it is not fitted to low-passed ones).
+        if self._hidden_layers():
+            return []
+        arx = self._arx if self._arx_measured is None else self._arx_measured
+        return [self._weights_at(arx, np.random.RandomState(0))]
+
+    def _weights_at(self, arx: np.ndarray, rng) -> np.ndarray:
+        """Network weights drawn by ``rng``, the linear part at ``arx``."""
         layout = self._layout()
         w = np.zeros(layout.n_params)
         layout.draw_weights(w, rng, self.activation)
-        theta_L, theta_b = self._arx[:-1].T, self._arx[-1]
+        theta_L, theta_b = arx[:-1].T, arx[-1]
         out = layout.layers[-1]
         if len(layout.layers) == 1:
             w[out.weights] = theta_L.ravel()
