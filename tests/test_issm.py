@@ -481,10 +481,11 @@ def test_tdl_start_runs_exactly_as_its_tdl(p, m, hidden, activation, delay):
     Xn, yn = X[2], y[2]
     assert model.n_states_ == 3 * p + 2 * m
     # The TDL's restarts, and its refinement of the linear model where it is
-    # a network.
+    # a network, or its closed-form fit where it is linear.
     refined = 2 if len(hidden) else None
-    assert len(model.restart_scores_) == 2 + bool(len(hidden))
+    assert len(model.restart_scores_) == 3
     assert model.tdl_.refined_restart_ == refined == model.refined_restart_
+    assert model.tdl_.closed_form_restarts_ == ([] if len(hidden) else [2])
     np.testing.assert_allclose(model.simulate(Xn), model.tdl_.simulate(Xn), atol=1e-10)
     for k in (1, 5):
         np.testing.assert_allclose(
