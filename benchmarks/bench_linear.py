@@ -22,9 +22,16 @@ With ``--in-motion`` the chains' training records are cut 500 samples into
 the response, so that they start in motion (as a record cut from a longer
 measurement), and the oscillator section is left out.
 
-Run: ``python benchmarks/bench_linear.py [out.md] [--in-motion]`` (3-20
-minutes: the ISSM's fits of the three-mode chain take up to 200 CPU seconds
-each); results in ``results_linear.md``.
+With ``--record FILE`` a measured record of one input and one output (two
+columns of text, as the DaISy collection's; the toolbox does not fetch it)
+is fitted instead: the first 768 samples train, and the free run over the
+whole record from rest is scored on the rest, next to least-squares ARX of
+6 and 10 lags (for example the flexible robot arm's record, DaISy 96-009,
+torque in and acceleration out, 1024 samples).
+
+Run: ``python benchmarks/bench_linear.py [out.md] [--in-motion | --record
+FILE]`` (3-20 minutes: the ISSM's fits of the three-mode chain take up to
+200 CPU seconds each); results in ``results_linear.md``.
 """
 
 from __future__ import annotations
@@ -186,12 +193,76 @@ def oscillator_rows() -> list[dict]:
     return rows
 
 
+def record_rows(path: str, n_train: int = 768) -> list[str]:
+    """A measured record of one input and one output (two columns of text):
+    the first ``n_train`` samples train, the free run over the whole record
+    from rest is scored on the rest (NRMSE), as least squares is."""
+    data = np.loadtxt(path)
+    u, y = data[:, 0], data[:, 1]
+    X = u[:, None]
+
+    def score(sim):
+        sim = np.asarray(sim).ravel()
+        if not np.all(np.isfinite(sim)):
+            return np.inf
+        return float(nrmse(y[n_train:], sim[n_train:]))
+
+    lines = [
+        f"Record `{path}`: {len(y)} samples, the first {n_train} train.",
+        "",
+        "| model | NRMSE, `random_state` 0, 1, 2 | order | CPU-s |",
+        "|---|---|---|---|",
+    ]
+    for lags in (6, 10):
+        ls = arx_free_run(u[:n_train], y[:n_train], lags, lags, u)
+        lines.append(f"| least-squares ARX({lags}, {lags}) | {score(ls):.3g} | | |")
+    models = {
+        "TDLRegressor(hidden_layer_sizes=())": dict(hidden_layer_sizes=()),
+        "TDLRegressor(hidden_layer_sizes=(), output_lags=10, input_lags=10)": dict(
+            hidden_layer_sizes=(), output_lags=10, input_lags=10
+        ),
+        "TDLRegressor()": {},
+        "ISSMRegressor()": None,
+    }
+    for label, params in models.items():
+        scores, orders, cpu = [], [], []
+        for seed in SEEDS:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                t0 = time.process_time()
+                if params is None:
+                    model = ISSMRegressor(random_state=seed)
+                else:
+                    model = TDLRegressor(random_state=seed, **params)
+                model.fit(X[:n_train], y[:n_train])
+                cpu.append(time.process_time() - t0)
+            scores.append(score(model.simulate(X)))
+            orders.append(getattr(model, "n_states_", None) or model.output_lags_)
+        lines.append(
+            f"| `{label}` | {', '.join(f'{v:.3g}' for v in scores)} | "
+            f"{', '.join(map(str, orders))} | {_median_range(cpu)} |"
+        )
+        print(lines[-1], flush=True)
+    return lines
+
+
 def main(*argv: str) -> int:
-    """``[out.md] [--in-motion]``: with ``--in-motion`` the chains' training
-    records start 500 samples into the response, and the oscillator is not
-    run."""
+    """``[out.md] [--in-motion] [--record FILE]``: with ``--in-motion`` the
+    chains' training records start 500 samples into the response, and the
+    oscillator is not run; with ``--record`` only that measured record is
+    fitted (see :func:`record_rows`)."""
     in_motion = "--in-motion" in argv
-    out = next((a for a in argv if not a.startswith("--")), None)
+    files = [a for a in argv if not a.startswith("--")]
+    if "--record" in argv:
+        record = argv[argv.index("--record") + 1]
+        files.remove(record)
+        text = "\n".join(record_rows(record))
+        print(text)
+        if files:
+            with open(files[0], "w") as f:
+                f.write(text + "\n")
+        return 0
+    out = files[0] if files else None
     start = time.time()
     chains = linear_chain_rows(lead=500 if in_motion else 0)
     lines = [
