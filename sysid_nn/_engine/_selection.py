@@ -5,9 +5,12 @@
 * :func:`linear_candidate`, before the restarts: the same estimator with no
   hidden layer (the linear output-error model: its free run is trained by
   the same schedule, which stabilises most unstable linear starts; one that
-  still diverges on validation has an infinite loss and loses), and the
-  burn-in that validation records simulated from rest skip where they start
-  in motion (:func:`burn_in`);
+  still diverges on validation has an infinite loss and loses), beside its
+  closed-form fits as they are (:func:`closed_form_runs`), which a trained
+  one must fit the training records no worse than; and how validation
+  records are judged (:func:`judgement`: the burn-in that records simulated
+  from rest skip where they start in motion, a fitted start, or a held-out
+  tail's continuation);
 * :func:`choose`, after them: every restart whose free run diverges on the
   training excitation at twice its amplitude, or leaves five times the
   training outputs' largest value there, is disqualified, and so is,
@@ -213,7 +216,7 @@ def closed_form_runs(lin, train, val, new_restart) -> list:
     TDL fitted to low-passed records (``shooting="free"``) starts there,
     and its least-squares fit to the measured records is one (a flexible
     arm's acceleration, 768 samples: test NRMSE 0.62 from the low-passed
-    start, 0.06 for the fit to the measured record).
+    start, 0.067 for the fit to the measured record).
     """
     n_stages = len(lin._stages())
     runs = []
