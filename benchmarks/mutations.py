@@ -241,9 +241,9 @@ MUTATIONS = (
     Mutation(
         "arx rows with rest lags",
         "sysid_nn/_estimators/_tdl.py",
-        "        rows = data.measured_rows(data.h)\n",
-        "        rows = data.modelled\n",
-        ("tests/test_tdl.py::test_arx_start_regresses_only_on_measured_lags",),
+        "        rows = measured.measured_rows(data.h)\n",
+        "        rows = measured.modelled\n",
+        ("tests/test_tdl.py::test_closed_form_fit_regresses_only_on_measured_lags",),
     ),
     Mutation(
         "linear model judged from rest",

@@ -104,7 +104,7 @@ def test_lm_iterates_equal_those_of_the_full_jacobian(kind, seg):
     for full in (True, False):
         tracker = _Recorder()
         objective = _objective(est, data, seg, full)
-        w_end, n_eval, converged = _solve_lm(objective, w, 15, 1e-12, tracker)
+        w_end, n_eval, converged = _solve_lm(objective, w, 10, 1e-12, tracker)
         runs.append((tracker.iterates, n_eval, converged, objective.loss(w_end)))
     (steps_full, *end_full), (steps_acc, *end_acc) = runs
     assert len(steps_full) == len(steps_acc) >= 5

@@ -694,11 +694,11 @@ def test_output_noise_is_estimated_and_warned_about_when_it_swamps_the_dynamics(
     np.testing.assert_allclose(noisy.output_noise_std_, 0.01 * y.std(), rtol=0.2)
 
 
-def test_arx_start_regresses_only_on_measured_lags():
+def test_closed_form_fit_regresses_only_on_measured_lags():
     # Records cut from a longer response start in motion: the rows whose
     # lags reach into the history (the rest state, not measurements) are
-    # left out of the least-squares start, which then recovers the system
-    # exactly from noise-free records.
+    # left out of the linear model's least-squares fit, which then recovers
+    # the system exactly from noise-free records.
     rng = np.random.default_rng(0)
     b, a = [0.0, 0.5, 0.2], [1.0, -1.5, 0.7]
     Xs = [rng.standard_normal((500, 1)) for _ in range(3)]
@@ -717,7 +717,7 @@ def test_arx_start_regresses_only_on_measured_lags():
         warnings.simplefilter("ignore")
         model.fit([X[100:] for X in Xs], ys)
     sy, sx = model._y_scale[0], model._x_scale[0]
-    W = model._arx[:-1, 0] @ model._S
+    W = model._closed_form_fits()[0][:4] @ model._S
     coef = np.array([W[0], W[1], W[2] * sy / sx, W[3] * sy / sx])
     np.testing.assert_allclose(coef, [1.5, -0.7, 0.5, 0.2], atol=1e-9)
 
