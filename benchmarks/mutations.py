@@ -90,8 +90,8 @@ MUTATIONS = (
     Mutation(
         "worst restart",
         "sysid_nn/_engine/_selection.py",
-        "best = min(pool, key=lambda r: r.criterion)",
-        "best = max(pool, key=lambda r: r.criterion)",
+        'return min(pool, key=lambda r: r.criterion), "restart"',
+        'return max(pool, key=lambda r: r.criterion), "restart"',
         (f"{POLICY}::test_without_a_linear_candidate_the_best_restart_is_kept",),
     ),
     Mutation(
@@ -290,8 +290,8 @@ MUTATIONS = (
     Mutation(
         "closed-form fit to low-passed records",
         "sysid_nn/_estimators/_tdl.py",
-        "arx = self._arx if self._arx_measured is None else self._arx_measured",
-        "arx = self._arx",
+        "        arx_phi = self._regressors(measured, rows)\n",
+        "        arx_phi, measured = self._regressors(data, rows), data\n",
         (
             f"{POLICY}::test_linear_model_fits_its_training_records_no_worse_than_least_squares",
         ),
