@@ -41,8 +41,8 @@ MUTATIONS = (
     Mutation(
         "burn-in",
         "sysid_nn/_records/_data.py",
-        "skip = max(self.burn, self.lead)",
-        "skip = self.lead",
+        "return self._rows_after(max(self.burn, self.lead))",
+        "return self._rows_after(self.lead)",
         (f"{POLICY}::test_validation_score_leaves_out_the_burn_in_rows",),
     ),
     Mutation(
@@ -201,8 +201,8 @@ MUTATIONS = (
     Mutation(
         "continuation judged over the training part too",
         "sysid_nn/_records/_data.py",
-        "skip = max(self.burn, self.lead)",
-        "skip = self.burn",
+        "return self._rows_after(max(self.burn, self.lead))",
+        "return self._rows_after(self.burn)",
         (
             "tests/test_selection.py::"
             "test_short_tail_of_a_record_at_rest_is_judged_as_its_continuation",

@@ -55,7 +55,7 @@ from sysid_nn._engine._issm_start import (
     subspace_horizon,
     subspace_records,
 )
-from sysid_nn._engine._selection import _FITTED_START_GAIN, _START_WINDOW, _burn_cap
+from sysid_nn._engine._selection import _FITTED_START_GAIN, start_window
 from sysid_nn._engine._subspace import is_stable, output_error_model, projection
 from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._kernels._linear import linear_free_run
@@ -131,7 +131,7 @@ def select_order(est, train, val, n_weights) -> Bunch:
     proj = projection(Y, U, horizon, constant=True)
     sv = proj.singular_values
     orders = np.arange(p, min(top, len(sv) - 1) + 1)
-    window = _start_window(val)
+    window = start_window(val)
     runs = np.array(
         [_score(est, output_error_model(Y, U, proj, n), val, window) for n in orders]
     )
@@ -292,13 +292,6 @@ def _n_weights(est, n: int) -> int:
     n_z = n + est.n_features_in_ + est.n_outputs_
     width = auto_width(n, est.n_outputs_)
     return n_z * width + width + width * n + n + n * n_z
-
-
-def _start_window(data) -> int:
-    """Samples a validation run's start is fitted to: as the selection's
-    (:data:`~sysid_nn._engine._selection._START_WINDOW`, at most half the
-    shortest record)."""
-    return min(_START_WINDOW, _burn_cap(data))
 
 
 def _fitted_start_judges(runs: np.ndarray) -> bool:

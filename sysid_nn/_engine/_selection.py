@@ -246,7 +246,7 @@ def judgement(est, lin, w: np.ndarray, train, val) -> tuple:
         # fitted to their first samples, validation runs start so (records
         # that start at rest need not: the hysteretic oscillator's linear
         # models drift and never forget their start either).
-        window = min(_START_WINDOW, _burn_cap(val))
+        window = start_window(val)
         fitted = validation_loss(
             lin, w, replace(val, start_window=window, burn=window), seg
         )
@@ -385,6 +385,12 @@ def starts_at_rest(est, data) -> bool:
         [data.Y[a + data.h : a + data.h + _REST_SAMPLES] for a in data.starts[:-1]]
     )
     return bool(np.all(np.abs(heads - rest) <= _AT_REST))
+
+
+def start_window(data) -> int:
+    """Samples a validation run's start is fitted to: ``_START_WINDOW``, at
+    most the longest burn-in (:func:`_burn_cap`)."""
+    return min(_START_WINDOW, _burn_cap(data))
 
 
 def _burn_cap(data) -> int:

@@ -256,18 +256,19 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     start = time.perf_counter()
     n_stages = len(est._stages())
     halving = n_runs > 1 and n_stages > HALVING_AFTER
+
+    def new_restart(k: int) -> _Restart:  # the linear model's runs
+        return _Restart(k, int(seeds[0]))
+
     # The linear model every network must beat; it also sets the burn-in
     # of validation records simulated from rest (see sysid_nn._engine._selection).
-    linear = _selection.linear_candidate(
-        est, train_data, val, lambda k: _Restart(k, int(seeds[0]))
-    )
+    linear = _selection.linear_candidate(est, train_data, val, new_restart)
     if linear is not None and val is not None:
         if linear.continuation is not None:
             val = linear.continuation
         val = replace(val, burn=linear.burn, start_window=linear.start_window)
     elif val is not None and not est._hidden_layers():
-        # A linear model is judged as the networks are, from its own start
-        # (the closed-form fit).
+        # A linear model is judged as the networks are, from its own start.
         w0 = est._initial_params(np.random.RandomState(0))
         burn, window, whole, _ = _selection.judgement(est, est, w0, train_data, val)
         val = replace(val if whole is None else whole, burn=burn, start_window=window)
@@ -284,9 +285,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     closed_form = []
     if not est._hidden_layers():
         # A linear model: its closed-form fits are candidates as they are.
-        fits = _selection.closed_form_runs(
-            est, train_data, val, lambda k: _Restart(k, int(seeds[0]))
-        )
+        fits = _selection.closed_form_runs(est, train_data, val, new_restart)
         closed_form = list(range(len(runs), len(runs) + len(fits)))
         runs += fits
     refined = None

@@ -59,12 +59,7 @@ class _Data:
     @property
     def modelled(self) -> np.ndarray:
         """Row indices of the modelled (non-history) rows."""
-        return np.concatenate(
-            [
-                np.arange(a + self.h, b)
-                for a, b in zip(self.starts[:-1], self.starts[1:], strict=True)
-            ]
-        )
+        return self._rows_after(0)
 
     def measured_rows(self, reach: int) -> np.ndarray:
         """Modelled rows whose ``reach`` previous rows are modelled too.
@@ -74,14 +69,16 @@ class _Data:
         read its history rows, which hold the rest state, not measurements
         (a record that starts in motion would bias the fit).
         """
-        rows = [np.arange(a + self.h + reach, b) for a, b in pairwise(self.starts)]
-        return np.concatenate(rows)
+        return self._rows_after(reach)
 
     @property
     def judged(self) -> np.ndarray:
         """Modelled rows that count in a validation loss (after the burn-in
         and the lead)."""
-        skip = max(self.burn, self.lead)
+        return self._rows_after(max(self.burn, self.lead))
+
+    def _rows_after(self, skip: int) -> np.ndarray:
+        """The modelled rows of every sequence but its first ``skip``."""
         rows = [np.arange(a + self.h + skip, b) for a, b in pairwise(self.starts)]
         return np.concatenate(rows)
 
