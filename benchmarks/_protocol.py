@@ -23,6 +23,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 from scipy.signal import butter, filtfilt
@@ -183,6 +184,19 @@ def timed_fit(model, X, y, X_val=None, y_val=None):
         warnings.simplefilter("ignore")
         model.fit(X, y, X_val=X_val, y_val=y_val)
     return model, time.process_time() - t0
+
+
+def load_range(rows) -> str:
+    """``"min-max"`` of the 1-minute loads recorded in ``rows`` (``"load"``)."""
+    loads = [r["load"] for r in rows]
+    return f"{min(loads):.1f}-{max(loads):.1f}"
+
+
+def write_report(text: str, out: str | None, default: str) -> None:
+    """Print a benchmark's report and write it to ``out``, or to the file
+    ``default`` beside the benchmarks."""
+    print(text)
+    Path(out if out else Path(__file__).with_name(default)).write_text(text)
 
 
 def median_range(values, digits: int = 3) -> str:

@@ -91,9 +91,8 @@ def report(found: list[dict], wall: float) -> str:
         "",
         "Command: `python benchmarks/bench_held_out_tail.py` "
         f"(wall time {wall / 60:.1f} min, fits on one core, 1-minute load "
-        f"{min(r['load'] for r in found):.1f}-{max(r['load'] for r in found):.1f}"
-        " on 2 cores). Median (range) over `random_state` 0-4; NRMSE of the free "
-        "run from rest.",
+        f"{P.load_range(found)} on 2 cores). Median (range) over `random_state` "
+        "0-4; NRMSE of the free run from rest.",
         "",
         "| record | model | own record | unseen: median | unseen: worst | "
         "fits with a diverged unseen record | tail as continuation | "
@@ -117,10 +116,7 @@ def report(found: list[dict], wall: float) -> str:
 
 def main(out: str | None = None) -> int:
     start = time.time()
-    text = report(rows(), time.time() - start)
-    print(text)
-    path = Path(out) if out else Path(__file__).with_name("results_held_out_tail.md")
-    path.write_text(text)
+    P.write_report(report(rows(), time.time() - start), out, "results_held_out_tail.md")
     return 0
 
 

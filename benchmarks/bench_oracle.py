@@ -154,8 +154,7 @@ def report(rows: list[dict], wall: float) -> str:
         "Command: `python benchmarks/bench_oracle.py` "
         f"(wall time {wall / 60:.1f} min; fit CPU time "
         f"{P.median_range([r['cpu'] for r in rows])} s, one core; 1-minute load "
-        f"{min(r['load'] for r in rows):.1f}-{max(r['load'] for r in rows):.1f} "
-        "on 2 cores).",
+        f"{P.load_range(rows)} on 2 cores).",
         "",
         "Median (range) over `random_state` 0-2. `ratio`: the fit's free-run MSE "
         "on its noisy training record over the clean fit's on the same record "
@@ -192,10 +191,7 @@ def report(rows: list[dict], wall: float) -> str:
 def main(out: str | None = None) -> int:
     start = time.time()
     rows = [r for system in SYSTEMS for r in rows_of(system)]
-    text = report(rows, time.time() - start)
-    print(text)
-    path = Path(out) if out else Path(__file__).with_name("results_oracle.md")
-    path.write_text(text)
+    P.write_report(report(rows, time.time() - start), out, "results_oracle.md")
     return 0
 
 
