@@ -523,7 +523,15 @@ def excursion_ratios(est, runs: list, train, linear) -> np.ndarray:
     return np.array(ratios)
 
 
-def choose(est, train, val, runs: list, linear: LinearCandidate | None, closed_form=()):
+def choose(
+    est,
+    train,
+    val,
+    runs: list,
+    linear: LinearCandidate | None,
+    closed_form=(),
+    warn: bool = True,
+):
     """The run ``fit`` keeps, what it is and the evidence: ``(run,
     "restart" | "linear", bounded, excursions)``, a flag and a ratio per run.
 
@@ -534,9 +542,9 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None, closed_f
     records those whose training loss is above the linear model's; the best
     remaining one is kept if its criterion beats the linear model's
     (validation loss, or training loss without validation), else the linear
-    model, with a warning. A linear model's own runs (``linear`` None) are
-    held, with validation records, to the training loss of its closed-form
-    fits, the runs ``closed_form`` indexes.
+    model, with a warning where ``warn``. A linear model's own runs
+    (``linear`` None) are held, with validation records, to the training
+    loss of its closed-form fits, the runs ``closed_form`` indexes.
     """
     excursions = excursion_ratios(est, runs, train, linear)
     bounded = [
@@ -573,6 +581,8 @@ def choose(est, train, val, runs: list, linear: LinearCandidate | None, closed_f
         return replace(lin, w=linear.w), "linear", bounded, excursions
     if left:
         best = min(left, key=lambda r: r.criterion)
+    if not warn:
+        return replace(lin, w=linear.w), "linear", bounded, excursions
     if best is None:
         what = (
             f"no trained network fitted the training records better (the "

@@ -54,6 +54,12 @@ _REFINE_SCALE = 0.1
 #: TDL's refinement still improved after 150 and 300 steps and stopped at
 #: 515 (test 2.74 / 2.31 / 2.08 mV, 17 / 35 / 64 CPU-seconds).
 _REFINE_BUDGET = 5
+#: Where no restart beats the linear model, this many more batches of
+#: ``n_init`` restarts run before it is returned: on the EMPS benchmark one
+#: TDL restart in four reached the basin of the fits that test at 5.3 mm
+#: (training free-run loss 0.0015 against the linear model's 0.013), and
+#: ``random_state=2`` had none of its four there (13.8 mm, the linear model).
+_EXTRA_BATCHES = 1
 
 # BLAS thread limits are process-wide: fits running in threads of one process
 # (the threading backend, in-process dask workers, GridSearchCV with threads)
@@ -235,6 +241,9 @@ class Training:
     #: The validation records as they were judged (burn-in and fitted
     #: start set from the linear model), or None.
     validation: _Data | None = None
+    #: Batches of restarts run: a second where the first lost to the
+    #: linear model (see :data:`_EXTRA_BATCHES`).
+    batches: int = 1
 
     @property
     def run(self) -> _Run:
@@ -272,16 +281,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         w0 = est._initial_params(np.random.RandomState(0))
         burn, window, whole, _ = _selection.judgement(est, est, w0, train_data, val)
         val = replace(val if whole is None else whole, burn=burn, start_window=window)
-    restarts = [_Restart(k, seed) for k, seed in enumerate(seeds)]
-    cut = HALVING_AFTER if halving else n_stages
-    results = run_restarts(est, train_data, val, restarts, cut)
-    if halving:
-        kept = survivors([run.criterion for _, run in results])
-        going_on = [results[k][0] for k in kept]
-        done = run_restarts(est, train_data, val, going_on, n_stages)
-        for k, result in zip(kept, done, strict=True):
-            results[k] = result
-    runs = [run for _, run in results]
+    runs = run_batch(est, train_data, val, seeds, halving)
     closed_form = []
     if not est._hidden_layers():
         # A linear model: its closed-form fits are candidates as they are.
@@ -292,9 +292,19 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     if linear is not None:
         refined = len(runs)
         runs.append(refine_linear(est, train_data, val, linear, refined, refine_seed))
-    best, chosen, selected, bounded, excursions = choose_restart(
-        est, train_data, val, runs, linear, closed_form
-    )
+    batches = 1
+    while True:
+        last = batches > _EXTRA_BATCHES or linear is None
+        best, chosen, selected, bounded, excursions = choose_restart(
+            est, train_data, val, runs, linear, closed_form, warn=last
+        )
+        if selected != "linear" or last:
+            break
+        # No network beat the linear model: another batch of restarts, on
+        # seeds drawn after the first batch's (whose fits stay as they were).
+        more = rng.randint(np.iinfo(np.int32).max, size=n_runs)
+        runs += run_batch(est, train_data, val, more, halving)
+        batches += 1
     if not np.all(np.isfinite(chosen.w)):
         raise ValueError(
             "The solver produced non-finite weights. Check the data for "
@@ -317,7 +327,29 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         refined=refined,
         closed_form=closed_form,
         validation=val,
+        batches=batches,
     )
+
+
+def run_batch(est, train_data, val, seeds, halving: bool) -> list:
+    """The runs of one batch of restarts, one per seed, through the stages.
+
+    With ``halving``, every restart runs the first :data:`HALVING_AFTER`
+    stages and the better half by its criterion the rest (see
+    :func:`~sysid_nn._engine._schedule.survivors`). Restart ``k`` of a batch
+    starts as restart ``k`` of any other (the ISSM's linear start).
+    """
+    n_stages = len(est._stages())
+    restarts = [_Restart(k, int(seed)) for k, seed in enumerate(seeds)]
+    cut = HALVING_AFTER if halving else n_stages
+    results = run_restarts(est, train_data, val, restarts, cut)
+    if halving:
+        kept = survivors([run.criterion for _, run in results])
+        going_on = [results[k][0] for k in kept]
+        done = run_restarts(est, train_data, val, going_on, n_stages)
+        for k, result in zip(kept, done, strict=True):
+            results[k] = result
+    return [run for _, run in results]
 
 
 def refine_linear(est, train_data, val, linear, k: int, seed: int) -> _Run:
@@ -349,7 +381,9 @@ def refine_linear(est, train_data, val, linear, k: int, seed: int) -> _Run:
     return refiner._fit_one(train_data, val, restart, n_stages)[1]
 
 
-def choose_restart(est, train_data, val, runs: list, linear, closed_form=()):
+def choose_restart(
+    est, train_data, val, runs: list, linear, closed_form=(), warn: bool = True
+):
     """The run whose weights ``fit`` returns: ``(index, run, selected,
     bounded, excursions)``, ``bounded`` whether each run's free run stays
     bounded, ``excursions`` its constant-input excursion over its bound.
@@ -362,7 +396,7 @@ def choose_restart(est, train_data, val, runs: list, linear, closed_form=()):
     ``selected`` ``"linear"``). See :func:`sysid_nn._engine._selection.choose`.
     """
     chosen, selected, bounded, excursions = _selection.choose(
-        est, train_data, val, runs, linear, closed_form
+        est, train_data, val, runs, linear, closed_form, warn
     )
     index = next((k for k, r in enumerate(runs) if r is chosen), None)
     return index, chosen, selected, bounded, excursions

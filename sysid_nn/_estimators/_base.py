@@ -402,6 +402,7 @@ class _RecurrentRegressorBase(
         self.restart_bounded_ = np.array(result.bounded, dtype=bool)
         self.restart_excursions_ = np.asarray(result.excursions, dtype=float)
         self.n_restarts_ = len(result.runs)
+        self.restart_batches_ = result.batches
         self.best_restart_ = result.chosen
         self.refined_restart_ = result.refined
         self.closed_form_restarts_ = list(result.closed_form)

@@ -103,12 +103,18 @@ restart_excursions_ : ndarray
     the restart out (``restart_bounded_``).
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
+restart_batches_ : int
+    Batches of ``n_init`` restarts run: 2 where no restart of the first
+    beat the linear model, and a second batch, on new seeds, was run before
+    the linear model was returned (its restarts follow the refinement in
+    ``restart_scores_``).
 best_restart_ : int or None
     Index of the chosen restart in ``restart_scores_``; None where the
     linear model was returned (``selected_ == "linear"``).
 refined_restart_ : int or None
     Index in ``restart_scores_`` of the restart that refines the trained
-    linear model (the last; None where the linear model is no candidate):
+    linear model (after the first batch's restarts; None where the linear
+    model is no candidate):
     it starts at the linear model with small hidden weights and runs the
     final stage of the schedule only, with five times ``max_iter``.
 closed_form_restarts_ : list of int
