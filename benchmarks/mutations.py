@@ -319,6 +319,38 @@ MUTATIONS = (
         "    if False:",
         (f"{POLICY}::test_networks_linear_model_is_held_to_its_closed_form_fit",),
     ),
+    Mutation(
+        "no second batch",
+        "sysid_nn/_engine/_training.py",
+        "_EXTRA_BATCHES = 1\n",
+        "_EXTRA_BATCHES = 0\n",
+        (
+            "tests/test_selection.py::"
+            "test_second_batch_of_restarts_where_the_first_lost_to_the_linear_model",
+        ),
+    ),
+    Mutation(
+        "warned before the second batch",
+        "sysid_nn/_engine/_training.py",
+        "est, train_data, val, runs, linear, closed_form, warn=last\n",
+        "est, train_data, val, runs, linear, closed_form, warn=True\n",
+        (
+            "tests/test_selection.py::"
+            "test_second_batch_of_restarts_where_the_first_lost_to_the_linear_model",
+            "tests/test_selection.py::"
+            "test_linear_model_returned_after_every_batch_lost_warns_once",
+        ),
+    ),
+    Mutation(
+        "fitted start weighed within the burn-in",
+        "sysid_nn/_engine/_selection.py",
+        "        late = max(burn, window)\n",
+        "        late = window\n",
+        (
+            "tests/test_selection.py::"
+            "test_fitted_validation_start_is_weighed_against_the_burn_in",
+        ),
+    ),
 )
 
 

@@ -472,6 +472,86 @@ def test_fitted_validation_start_is_weighed_against_the_burn_in():
     assert loss(True, start_window(val)) < 0.5 * loss(False, start_window(val))
 
 
+def _first_batches_lost(monkeypatch, n_lost):
+    """Make the first ``n_lost`` batches of restarts (and, if any, the
+    refinement of the linear model) diverge; returns the seeds of every
+    batch run."""
+    from sysid_nn._engine import _training
+
+    real, batches = _training.run_batch, []
+
+    def run_batch(est, train_data, val, seeds, halving):
+        runs = real(est, train_data, val, seeds, halving)
+        batches.append([int(seed) for seed in seeds])
+        if len(batches) <= n_lost:
+            runs = [
+                replace(r, loss=np.inf, val_loss=np.inf, criterion=np.inf) for r in runs
+            ]
+        return runs
+
+    def refine_linear(*args):
+        run = real_refine(*args)
+        if not n_lost:
+            return run
+        return replace(run, loss=np.inf, val_loss=np.inf, criterion=np.inf)
+
+    real_refine = _training.refine_linear
+    monkeypatch.setattr(_training, "run_batch", run_batch)
+    monkeypatch.setattr(_training, "refine_linear", refine_linear)
+    return batches
+
+
+def _cubic_record():
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((1200, 1))
+    x = lfilter([0, 0.5, 0.2], [1, -1.2, 0.5], u[:, 0])
+    return u, x + 0.3 * np.tanh(2 * x) ** 3 + 0.02 * rng.standard_normal(1200)
+
+
+def test_second_batch_of_restarts_where_the_first_lost_to_the_linear_model(
+    monkeypatch,
+):
+    # A first batch none of whose restarts beats the linear model (on the
+    # EMPS benchmark the TDL's four restarts of random_state=2 all stopped
+    # short of the networks' basin): a second batch on new seeds runs, and
+    # its best restart is kept, without the linear model's warning.
+    u, y = _cubic_record()
+    params = dict(
+        output_lags=2, input_lags=2, hidden_layer_sizes=(3,), n_init=2,
+        max_iter=10, random_state=0,
+    )  # fmt: skip
+    with monkeypatch.context() as spied:
+        plain_batches = _first_batches_lost(spied, 0)
+        plain = TDLRegressor(**params).fit(u, y)
+    assert len(plain_batches) == plain.restart_batches_ == 1
+    assert plain.n_restarts_ == 3
+    batches = _first_batches_lost(monkeypatch, 1)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", "The linear model of", UserWarning)
+        model = TDLRegressor(**params).fit(u, y)
+    assert len(batches) == 2 and set(batches[0]).isdisjoint(batches[1])
+    assert model.restart_batches_ == 2 and model.n_restarts_ == 5
+    assert model.selected_ == "restart"
+    assert model.best_restart_ in (3, 4)  # after the first batch and the refinement
+    # The first batch's seeds are the plain fit's.
+    assert batches[0] == plain_batches[0]
+    assert -model.best_validation_score_ == -model.restart_scores_[model.best_restart_]
+
+
+def test_linear_model_returned_after_every_batch_lost_warns_once(monkeypatch):
+    u, y = _cubic_record()
+    batches = _first_batches_lost(monkeypatch, 2)
+    with pytest.warns(UserWarning, match="beat every trained network") as caught:
+        model = TDLRegressor(
+            output_lags=2, input_lags=2, hidden_layer_sizes=(3,), n_init=2,
+            max_iter=10, random_state=0,
+        ).fit(u, y)  # fmt: skip
+    assert len(batches) == 2
+    assert sum("beat every trained network" in str(w.message) for w in caught) == 1
+    assert model.selected_ == "linear" and model.restart_batches_ == 2
+    assert model.n_restarts_ == 5
+
+
 def test_burn_in_only_for_records_that_start_in_motion():
     from sysid_nn._engine._selection import burn_in
 
