@@ -330,15 +330,23 @@ MUTATIONS = (
         ),
     ),
     Mutation(
-        "warned before the second batch",
-        "sysid_nn/_engine/_training.py",
-        "est, train_data, val, runs, linear, closed_form, warn=last\n",
-        "est, train_data, val, runs, linear, closed_form, warn=True\n",
+        "second batch after a network fitted better",
+        "sysid_nn/_engine/_selection.py",
+        "    if retry and not fits_better(runs, bounded, linear):\n",
+        "    if retry:\n",
         (
             "tests/test_selection.py::"
-            "test_second_batch_of_restarts_where_the_first_lost_to_the_linear_model",
+            "test_linear_model_is_returned_where_no_restart_beats_it",
+        ),
+    ),
+    Mutation(
+        "second batch where a network fitted better",
+        "sysid_nn/_engine/_training.py",
+        "            or _selection.fits_better(runs, bounded, linear)\n",
+        "            or False\n",
+        (
             "tests/test_selection.py::"
-            "test_linear_model_returned_after_every_batch_lost_warns_once",
+            "test_linear_model_is_returned_where_no_restart_beats_it",
         ),
     ),
     Mutation(

@@ -729,8 +729,11 @@ def test_default_start_follows_the_noise_on_the_records():
     u, y = _noisy_second_order(0.0)
     model = fit(y)
     assert model.init_ == "arx"
-    # The restart, and the refinement of the linear model.
-    assert len(model.restart_scores_) == 2 and model.refined_restart_ == 1
+    # The restart, and the refinement of the linear model; the linear model
+    # is exact, no network fits better, and a second batch of one restart
+    # runs after them.
+    assert model.refined_restart_ == 1 and model.restart_batches_ == 2
+    assert len(model.restart_scores_) == 3
     # Noisy: the subspace start, and one restart more from the ARX start;
     # init_ and linear_model_ are the chosen restart's.
     u, y = _noisy_second_order(0.05)
