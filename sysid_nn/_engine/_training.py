@@ -298,7 +298,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     while True:
         retry = batches <= _EXTRA_BATCHES and linear is not None
         best, chosen, selected, bounded, excursions = choose_restart(
-            est, train_data, val, runs, linear, closed_form, retry
+            est, train_data, val, runs, linear, closed_form, retry, refined
         )
         if (
             not retry
@@ -389,7 +389,14 @@ def refine_linear(est, train_data, val, linear, k: int, seed: int) -> _Run:
 
 
 def choose_restart(
-    est, train_data, val, runs: list, linear, closed_form=(), retry: bool = False
+    est,
+    train_data,
+    val,
+    runs: list,
+    linear,
+    closed_form=(),
+    retry: bool = False,
+    refined: int | None = None,
 ):
     """The run whose weights ``fit`` returns: ``(index, run, selected,
     bounded, excursions)``, ``bounded`` whether each run's free run stays
@@ -403,7 +410,7 @@ def choose_restart(
     ``selected`` ``"linear"``). See :func:`sysid_nn._engine._selection.choose`.
     """
     chosen, selected, bounded, excursions = _selection.choose(
-        est, train_data, val, runs, linear, closed_form, retry
+        est, train_data, val, runs, linear, closed_form, retry, refined
     )
     index = next((k for k, r in enumerate(runs) if r is chosen), None)
     return index, chosen, selected, bounded, excursions
