@@ -359,6 +359,36 @@ MUTATIONS = (
             "test_fitted_validation_start_is_weighed_against_the_burn_in",
         ),
     ),
+    Mutation(
+        "refinement never preferred",
+        "sysid_nn/_engine/_selection.py",
+        "            best = ref\n",
+        "            pass\n",
+        (
+            "tests/test_selection.py::"
+            "test_refinement_kept_unless_a_restart_validates_clearly_better",
+        ),
+    ),
+    Mutation(
+        "refinement always preferred",
+        "sysid_nn/_engine/_selection.py",
+        "and not clearly_better(est, best.w, ref.w, val, est._final_segment())",
+        "and True",
+        (
+            "tests/test_selection.py::"
+            "test_refinement_kept_unless_a_restart_validates_clearly_better",
+        ),
+    ),
+    Mutation(
+        "validation noise taken as independent",
+        "sysid_nn/_engine/_selection.py",
+        "nlags=int(np.sqrt(n))",
+        "nlags=0",
+        (
+            "tests/test_selection.py::"
+            "test_clearly_better_allows_for_autocorrelated_errors",
+        ),
+    ),
 )
 
 

@@ -375,6 +375,73 @@ def test_restart_that_fits_its_training_records_worse_than_linear_is_not_chosen(
     assert chosen.w is linear.w
 
 
+def test_refinement_kept_unless_a_restart_validates_clearly_better():
+    # On Cascaded Tanks the refinement of the linear model tested better
+    # than the restart that validated better in 9 of 10 fits where both were
+    # candidates; the restart is kept only where its validation error is
+    # lower beyond the validation's noise.
+    from sysid_nn._engine._selection import (
+        LinearCandidate,
+        choose,
+        clearly_better,
+        validation_loss,
+    )
+
+    (X, y, _), (Xv, yv, _) = (_linear_record(s, n=600, noise=0.1) for s in (0, 1))
+    y, yv = np.tanh(y), np.tanh(yv)
+    model = TDLRegressor(
+        output_lags=2, input_lags=2, hidden_layer_sizes=(3,), n_init=1,
+        max_iter=20, random_state=0,
+    ).fit(X, y, X_val=Xv, y_val=yv)  # fmt: skip
+    train = model._stack([X], [y[:, None]])
+    val = model._stack([Xv], [yv[:, None]])
+    w = model.coefs_
+    drift = np.random.default_rng(0).standard_normal(w.shape)
+    seg = model._final_segment()
+
+    def run(weights):
+        return _run(weights, 0.01, validation_loss(model, weights, val, seg))
+
+    linear = LinearCandidate(run=_run(w.copy(), 1.0, 1.0), w=w.copy())
+    restart = run(w.copy())
+    for scale, kept in ((1e-4, "refinement"), (0.03, "restart")):
+        refinement = run(w + scale * drift)
+        assert restart.criterion < refinement.criterion < linear.run.criterion
+        better = clearly_better(model, restart.w, refinement.w, val, seg)
+        assert better == (kept == "restart")
+        chosen, selected, *_ = choose(
+            model, train, val, [restart, refinement], linear, refined=1
+        )
+        assert selected == "restart"
+        assert chosen is (refinement if kept == "refinement" else restart)
+    # Without a refinement, or without validation records, the best is kept.
+    refinement = run(w + 1e-4 * drift)
+    assert choose(model, train, val, [restart, refinement], linear)[0] is restart
+
+
+def test_clearly_better_allows_for_autocorrelated_errors(monkeypatch):
+    # Free-run errors drift: the same mean difference is clear where the
+    # per-sample differences are independent and not where they wander.
+    from sysid_nn._engine import _selection
+
+    rng = np.random.default_rng(0)
+    n = 400
+    noise = rng.standard_normal(n)
+    wander = lfilter([1.0], [1.0, -0.95], noise) * np.sqrt(1 - 0.95**2)
+    for d, clear in ((noise, True), (wander, False)):
+        gap = 0.5 * (d - d.mean()) + 0.15  # the difference in squared error
+        ours = np.full((n, 1), 2.0)
+        theirs = np.sqrt(4.0 + gap)[:, None]
+        monkeypatch.setattr(
+            _selection,
+            "validation_residuals",
+            lambda est, w, val, seg, ours=ours, theirs=theirs: (
+                ours if w == 0 else theirs
+            ),
+        )
+        assert _selection.clearly_better(None, 0, 1, None, 1) == clear
+
+
 def test_linear_candidate_is_scored_on_the_restarts_objective():
     # With focus="prediction" the restarts are judged by their one-step
     # validation error; the linear model must be judged alike, not by its
