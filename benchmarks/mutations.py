@@ -382,8 +382,8 @@ MUTATIONS = (
     Mutation(
         "validation noise taken as independent",
         "sysid_nn/_engine/_selection.py",
-        "nlags=int(np.sqrt(n))",
-        "nlags=0",
+        "lag = int(np.sqrt(len(d) / (len(bounds) - 1)))",
+        "lag = 0",
         (
             "tests/test_selection.py::"
             "test_clearly_better_allows_for_autocorrelated_errors",

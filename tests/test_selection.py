@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -439,7 +440,8 @@ def test_clearly_better_allows_for_autocorrelated_errors(monkeypatch):
                 ours if w == 0 else theirs
             ),
         )
-        assert _selection.clearly_better(None, 0, 1, None, 1) == clear
+        val = SimpleNamespace(starts=np.array([0, n]), judged=np.arange(n))
+        assert _selection.clearly_better(None, 0, 1, val, 1) == clear
 
 
 def test_linear_candidate_is_scored_on_the_restarts_objective():

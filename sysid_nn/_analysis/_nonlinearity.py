@@ -59,6 +59,29 @@ class NonlinearityTestResult:
     level: float
 
 
+def loss_differential_statistic(d: np.ndarray, bounds: np.ndarray, lag: int) -> float:
+    """The Diebold-Mariano statistic of the loss differential ``d``.
+
+    Its mean over its standard error, from the Newey-West (Bartlett)
+    heteroscedasticity and autocorrelation consistent variance of
+    statsmodels with truncation lag ``lag``, within each record: ``bounds``
+    holds where each record's rows start in ``d``, and its end
+    (``cov_type="hac-panel"`` for several). ``inf`` (or NaN) where ``d`` is
+    constant.
+    """
+    n = len(d)
+    design = np.ones((n, 1))
+    if len(bounds) > 2:
+        groups = np.repeat(np.arange(len(bounds) - 1), np.diff(bounds))
+        fit = OLS(d, design).fit(
+            cov_type="hac-panel", cov_kwds={"groups": groups, "maxlags": lag}
+        )
+    else:
+        fit = OLS(d, design).fit(cov_type="HAC", cov_kwds={"maxlags": lag})
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return float(fit.params[0] / fit.bse[0])
+
+
 def _linear_of(estimator, linear_model):
     """The linear model to compare with: given, or the fit's own."""
     if linear_model is not None:
@@ -225,15 +248,7 @@ def nonlinearity_test(
     if np.all(d == 0):
         stat, p = 0.0, 0.5
     else:
-        design = np.ones((n, 1))
-        if len(diffs) > 1:
-            groups = np.repeat(np.arange(len(diffs)), np.diff(bounds))
-            fit = OLS(d, design).fit(
-                cov_type="hac-panel", cov_kwds={"groups": groups, "maxlags": lag}
-            )
-        else:
-            fit = OLS(d, design).fit(cov_type="HAC", cov_kwds={"maxlags": lag})
-        stat = float(fit.params[0] / fit.bse[0])
+        stat = loss_differential_statistic(d, bounds, lag)
         p = float(norm.sf(stat))
     evidence = (
         f"(Diebold-Mariano {stat:.2f}, one-sided p = {p:.2g}; mean squared "
