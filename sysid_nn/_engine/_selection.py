@@ -23,7 +23,9 @@
   worse); the best remaining restart is kept only if its validation loss
   beats the linear model's; otherwise the linear model is returned,
   embedded in the network's own weights (network output silent, linear
-  part = the linear model), with a warning.
+  part = the linear model), with a warning. The refinement of the linear
+  model is kept over a restart that validates better unless the restart is
+  :func:`clearly_better`.
 """
 
 from __future__ import annotations
@@ -74,10 +76,10 @@ _TIE = 1e-12
 #: many standard errors of the difference (see :func:`clearly_better`). On
 #: Cascaded Tanks (ISSM and TDL, ``random_state`` 0-4, the last fifth and
 #: the split moved by 10 or 25 samples) the refinement tested better than the
-#: restart that validated better in 9 of the 10 fits where both were
-#: candidates (0.52-0.75 against 0.84-1.59 V), at 0.7-2.8 standard errors,
-#: the exception at 2.2 (0.71 against 0.50 V); on EMPS the restarts that
-#: validated better did so by 4.8-6.1 (ISSM) and 7.8 (TDL) standard errors.
+#: restart that validated better in 7 of the 8 fits where both were
+#: candidates (0.52-0.75 against 0.84-1.59 V), the restart ahead by 0.7-2.8
+#: standard errors; the exception was ahead by 2.2 (0.50 against 0.71 V). On
+#: EMPS the restarts that validated better were ahead by 4.8-7.8.
 #: Two standard errors: the usual level of such a test (about 5 %).
 _SIGNIFICANT = 2.0
 #: Restarts are disqualified whose free run diverges on the training
@@ -465,9 +467,10 @@ def clearly_better(est, w: np.ndarray, than: np.ndarray, val, seg: int) -> bool:
     forecasts' accuracy that :func:`~sysid_nn.nonlinearity_test` makes, its
     standard error robust to the autocorrelation of free-run errors
     (Newey-West, within each validation record, over the square root of a
-    record's judged rows in lags: the test's own plug-in lag, up to half a
-    record, turned a restart on EMPS that validated better by 7.8 standard
-    errors at that lag, and tested 13 % better, into one of 1.8).
+    record's judged rows in lags: with the test's own plug-in lag, up to
+    half a record, an EMPS restart ahead by 7.8 standard errors at this lag
+    was ahead by 1.8, and lost to the refinement that tested at 7.2
+    against its 6.3 mm).
     """
     ours, theirs = (validation_residuals(est, v, val, seg) for v in (w, than))
     if ours is None or theirs is None:
