@@ -168,7 +168,9 @@ def test_refinement_reports_the_start_of_its_linear_model(monkeypatch):
 
     choose = _selection.choose
 
-    def refinement_wins(est, train, val, runs, linear, closed_form=(), retry=False):
+    def refinement_wins(
+        est, train, val, runs, linear, closed_form=(), retry=False, refined=None
+    ):
         _, _, bounded, excursions = choose(est, train, val, runs, linear, closed_form)
         return runs[-1], "restart", bounded, excursions
 

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import norm
 from sklearn.utils.validation import check_is_fitted
-from statsmodels.regression.linear_model import OLS
 
 from sysid_nn._analysis._uncertainty import _bandwidth
 from sysid_nn._records._data import is_sequence_list
+from sysid_nn._statistics import loss_differential_statistic
 
 __all__ = ["NonlinearityTestResult", "nonlinearity_test"]
 
@@ -57,29 +57,6 @@ class NonlinearityTestResult:
     lag: int
     n_samples: int
     level: float
-
-
-def loss_differential_statistic(d: np.ndarray, bounds: np.ndarray, lag: int) -> float:
-    """The Diebold-Mariano statistic of the loss differential ``d``.
-
-    Its mean over its standard error, from the Newey-West (Bartlett)
-    heteroscedasticity and autocorrelation consistent variance of
-    statsmodels with truncation lag ``lag``, within each record: ``bounds``
-    holds where each record's rows start in ``d``, and its end
-    (``cov_type="hac-panel"`` for several). ``inf`` (or NaN) where ``d`` is
-    constant.
-    """
-    n = len(d)
-    design = np.ones((n, 1))
-    if len(bounds) > 2:
-        groups = np.repeat(np.arange(len(bounds) - 1), np.diff(bounds))
-        fit = OLS(d, design).fit(
-            cov_type="hac-panel", cov_kwds={"groups": groups, "maxlags": lag}
-        )
-    else:
-        fit = OLS(d, design).fit(cov_type="HAC", cov_kwds={"maxlags": lag})
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return float(fit.params[0] / fit.bse[0])
 
 
 def _linear_of(estimator, linear_model):

@@ -36,10 +36,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sysid_nn._analysis._nonlinearity import loss_differential_statistic
 from sysid_nn._engine._state_estimation import _segments
 from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._records._data import _FREE_RUN, _Data
+from sysid_nn._statistics import loss_differential_statistic
 
 #: A validation record simulated from rest is judged after the linear
 #: model's response to its initial state has fallen below this share of
