@@ -243,8 +243,9 @@ class Training:
     #: The validation records as they were judged (burn-in and fitted
     #: start set from the linear model), or None.
     validation: _Data | None = None
-    #: Batches of restarts run: a second where the first lost to the
-    #: linear model (see :data:`_EXTRA_BATCHES`).
+    #: Batches of restarts run: a second where no run of the first fitted
+    #: the training records better than the linear model (see
+    #: :data:`_EXTRA_BATCHES`).
     batches: int = 1
 
     @property

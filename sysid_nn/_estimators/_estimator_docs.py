@@ -104,9 +104,10 @@ restart_excursions_ : ndarray
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
 restart_batches_ : int
-    Batches of ``n_init`` restarts run: 2 where no restart of the first
-    beat the linear model, and a second batch, on new seeds, was run before
-    the linear model was returned (its restarts follow the refinement in
+    Batches of ``n_init`` restarts run: 2 where no run of the first (the
+    refinement included) fitted the training records better than the linear
+    model, so that a second batch, on new seeds, ran before the linear model
+    could be returned (its restarts follow the refinement in
     ``restart_scores_``).
 best_restart_ : int or None
     Index of the chosen restart in ``restart_scores_``; None where the
