@@ -287,9 +287,10 @@ def judgement(est, lin, w: np.ndarray, train, val) -> tuple:
         )
         at_rest = validation_loss(lin, w, replace(val, burn=late), seg)
         if fitted < _FITTED_START_GAIN * max(at_rest, np.finfo(float).tiny):
-            fitted = validation_loss(
-                lin, w, replace(val, start_window=window, burn=window), seg
-            )
+            if late > window:  # judged after the window alone, as ``val`` will be
+                fitted = validation_loss(
+                    lin, w, replace(val, start_window=window, burn=window), seg
+                )
             return window, window, None, fitted  # ``val`` judged so
     if not settled and val.tail and _START_MEMORY < _start_memory(response, val) < 1.0:
         # From rest, the tail shows mostly the response to its wrong
