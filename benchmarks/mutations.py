@@ -389,6 +389,26 @@ MUTATIONS = (
             "test_clearly_better_allows_for_autocorrelated_errors",
         ),
     ),
+    Mutation(
+        "record in motion judged from rest on its tail",
+        "sysid_nn/_engine/_selection.py",
+        "        if at_rest or not est._estimates_start():\n",
+        "        if at_rest:\n",
+        (
+            "tests/test_selection.py::"
+            "test_tail_of_a_record_in_motion_is_judged_from_its_measured_start",
+        ),
+    ),
+    Mutation(
+        "record in motion continued from rest",
+        "sysid_nn/_engine/_selection.py",
+        "whole = continuation(train, val, measured_start=True)",
+        "whole = continuation(train, val)",
+        (
+            "tests/test_selection.py::"
+            "test_tail_is_judged_as_its_records_continuation_only_where_needed",
+        ),
+    ),
 )
 
 

@@ -1,10 +1,11 @@
-"""Small fitted models shared by the tests of saving and export."""
+"""Small fitted models shared by the tests of saving and export, and a
+lightly damped chain's transfer function."""
 
 import warnings
 
 import numpy as np
 import pytest
-from scipy.signal import lfilter
+from scipy.signal import cont2discrete, lfilter
 
 
 def _record(n_outputs: int, seed: int = 0):
@@ -42,3 +43,23 @@ def fitted_models():
                 est = _estimator(kind).fit(X, y)
             models[kind, n_outputs] = (est, X, y)
     return models
+
+
+def _modal_chain(freqs, zeta: float):
+    """``(b, a)`` of a sum of second-order modes (natural frequencies in
+    cycles per sample, damping ratio ``zeta``), sampled with a hold."""
+    b, a = np.zeros(1), np.ones(1)
+    for j, f in enumerate(freqs):
+        w = 2 * np.pi * f
+        num, den = [0.0, 0.0, (-1.0) ** j * w**2 / (j + 1)], [1.0, 2 * zeta * w, w**2]
+        bd, ad, _ = cont2discrete((num, den), 1.0, method="zoh")
+        b = np.polyadd(np.polymul(b, ad), np.polymul(np.ravel(bd), a))
+        a = np.polymul(a, ad)
+    return b, a
+
+
+@pytest.fixture(scope="session")
+def modal_chain():
+    """The function ``(freqs, zeta) -> (b, a)`` of a lightly damped chain's
+    transfer function (a sum of second-order modes)."""
+    return _modal_chain

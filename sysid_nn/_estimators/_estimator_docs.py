@@ -171,11 +171,13 @@ validation_start_window_ : int or None
     validation run; 0 otherwise, None without validation records.
 validation_continues_record_ : bool or None
     Whether the held-out tail of a single record was judged as the
-    continuation of the free run over the whole record from rest, rather
-    than from rest at its own start: done where the record starts at rest
-    and the linear model's response to a wrong start outlasts the tail
-    (more than 30 % of it left over the tail's last fifth), as for a
-    lightly damped structure; None without validation records.
+    continuation of the free run over the whole record, rather than from
+    rest at its own start: done where the linear model's response to a
+    wrong start outlasts the tail (more than 30 % of it left over the
+    tail's last fifth), as for a lightly damped structure, and the record
+    starts at rest (the run from rest) or the model is a TDL network (the
+    run from the record's first measured outputs, its whole initial
+    state); None without validation records.
 rest_output_ : ndarray of shape (n_outputs,) or None
     The output at the model's rest, where its free run settles under zero
     excitation (after 8192 samples of it; user units): free runs without
