@@ -410,6 +410,16 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "linear fits compared from rest",
+        "sysid_nn/_engine/_selection.py",
+        "key=lambda i: judged[i][3])",
+        "key=lambda i: fits[i][0].criterion)",
+        (
+            "tests/test_selection.py::"
+            "test_linear_fits_are_compared_as_validation_judges_them",
+        ),
+    ),
+    Mutation(
         "run-in never longer",
         "sysid_nn/_engine/_state_estimation.py",
         "        run_in *= 2\n",

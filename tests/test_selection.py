@@ -94,8 +94,8 @@ def test_issm_linear_candidate_comes_from_its_better_linear_start(monkeypatch):
         restart_, run = fit_one(self, train, val, restart, stop)
         if not self._hidden_layers():
             start = self._linear_starts[self._start_of(restart.k)][0]
-            if start == "subspace":
-                run = replace(run, criterion=np.inf, val_loss=np.inf)
+            if start == "subspace":  # weights whose free run diverges
+                run = replace(run, w=1e3 * run.w, criterion=np.inf, val_loss=np.inf)
             trained.append((restart.k, start, run.criterion))
         return restart_, run
 
@@ -736,3 +736,22 @@ def test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen(monkeypa
     assert selected == "restart"
     assert bounded == [False, False, True]
     np.testing.assert_array_equal(excursions, ratios)
+
+
+def test_linear_fits_are_compared_as_validation_judges_them(modal_chain):
+    # Three modes of 1 % damping, 1 % output noise, the record cut in
+    # motion. From rest at its start the validation tail shows mostly the
+    # wrong start: there the linear model trained from the ARX start scored
+    # 0.48 against 0.94 for the one from the subspace start, which, judged
+    # from a fitted start as the networks then are, scores 0.0023 against
+    # 0.48. The ARX one, kept, tested at 0.68 NRMSE.
+    b, a = modal_chain((0.03, 0.08, 0.15), 0.01)
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal(2500)
+    y = lfilter(b, a, u)
+    y = (y + 0.01 * y.std() * rng.standard_normal(len(y)))[500:]
+    model = ISSMRegressor(n_init=1, random_state=0).fit(u[500:, None], y)
+    assert model.init_ == "subspace"
+    assert model.validation_start_window_ > 0
+    u_test = np.random.default_rng(100).standard_normal((1000, 1))
+    assert nrmse(lfilter(b, a, u_test[:, 0]), model.simulate(u_test)) < 0.1

@@ -27,7 +27,7 @@ import threading
 import time
 import warnings
 from contextlib import contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import threadpoolctl
@@ -276,14 +276,14 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     # of validation records simulated from rest (see sysid_nn._engine._selection).
     linear = _selection.linear_candidate(est, train_data, val, new_restart)
     if linear is not None and val is not None:
-        if linear.continuation is not None:
-            val = linear.continuation
-        val = replace(val, burn=linear.burn, start_window=linear.start_window)
+        val = _selection.judged_records(
+            val, linear.burn, linear.start_window, linear.continuation
+        )
     elif val is not None and not est._hidden_layers():
         # A linear model is judged as the networks are, from its own start.
         w0 = est._initial_params(np.random.RandomState(0))
         burn, window, whole, _ = _selection.judgement(est, est, w0, train_data, val)
-        val = replace(val if whole is None else whole, burn=burn, start_window=window)
+        val = _selection.judged_records(val, burn, window, whole)
     runs = run_batch(est, train_data, val, seeds, halving)
     closed_form = []
     if not est._hidden_layers():
