@@ -412,11 +412,21 @@ MUTATIONS = (
     Mutation(
         "linear fits compared from rest",
         "sysid_nn/_engine/_selection.py",
-        "key=lambda i: judged[i][3])",
-        "key=lambda i: fits[i][0].criterion)",
+        "i = int(np.argmin(losses))",
+        "i = int(np.argmin([fit[0].criterion for fit in fits]))",
         (
             "tests/test_selection.py::"
             "test_linear_fits_are_compared_as_validation_judges_them",
+        ),
+    ),
+    Mutation(
+        "linear candidate judged as the best training fit sets",
+        "sysid_nn/_engine/_selection.py",
+        "        if run is not best_fit:\n",
+        "        if False:\n",
+        (
+            f"{POLICY}::"
+            "test_linear_fits_are_judged_alike_and_the_kept_one_sets_the_judgement",
         ),
     ),
     Mutation(
