@@ -410,23 +410,25 @@ MUTATIONS = (
         ),
     ),
     Mutation(
-        "linear fits compared from rest",
+        "linear fits clearly worse on training kept",
         "sysid_nn/_engine/_selection.py",
-        "i = int(np.argmin(losses))",
-        "i = int(np.argmin([fit[0].criterion for fit in fits]))",
+        "_LINEAR_FIT_MARGIN = 2.0\n",
+        "_LINEAR_FIT_MARGIN = np.inf\n",
         (
             "tests/test_selection.py::"
             "test_linear_fits_are_compared_as_validation_judges_them",
+            "tests/test_selection.py::"
+            "test_linear_fit_clearly_worse_on_training_is_no_candidate",
         ),
     ),
     Mutation(
-        "linear candidate judged as the best training fit sets",
+        "linear fits chosen by training loss",
         "sysid_nn/_engine/_selection.py",
-        "        if run is not best_fit:\n",
-        "        if False:\n",
+        "_LINEAR_FIT_MARGIN = 2.0\n",
+        "_LINEAR_FIT_MARGIN = 1.0\n",
         (
-            f"{POLICY}::"
-            "test_linear_fits_are_judged_alike_and_the_kept_one_sets_the_judgement",
+            "tests/test_selection.py::"
+            "test_linear_fit_clearly_worse_on_training_is_no_candidate",
         ),
     ),
     Mutation(

@@ -114,6 +114,44 @@ def test_issm_linear_candidate_comes_from_its_better_linear_start(monkeypatch):
     assert net.init_ == "arx"
 
 
+@pytest.mark.parametrize(("ratio", "kept"), [(1.5, "subspace"), (3.0, "arx")])
+def test_linear_fit_clearly_worse_on_training_is_no_candidate(monkeypatch, ratio, kept):
+    # The linear model trained from the subspace start made to validate
+    # better than the one from the ARX start while fitting the training
+    # records ``ratio`` times worse: within twice, validation chooses it;
+    # beyond, it is no candidate.
+    from dataclasses import replace
+
+    from sysid_nn._engine import _selection
+
+    (X, y, _), (Xv, yv, _) = (_linear_record(21 + k) for k in range(2))
+    fit_one = ISSMRegressor._fit_one
+
+    def made(self, train, val, restart, stop):
+        restart_, run = fit_one(self, train, val, restart, stop)
+        if not self._hidden_layers():
+            start = self._linear_starts[self._start_of(restart.k)][0]
+            subspace = start == "subspace"
+            loss, criterion = (ratio, 0.5) if subspace else (1.0, 1.0)
+            run = replace(run, loss=0.01 * loss, criterion=criterion)
+        return restart_, run
+
+    seen = []
+    candidate = _selection.linear_candidate
+
+    def spy(*args, **kwargs):
+        seen.append(candidate(*args, **kwargs))
+        return seen[-1]
+
+    monkeypatch.setattr(ISSMRegressor, "_fit_one", made)
+    monkeypatch.setattr(_selection, "linear_candidate", spy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        net = ISSMRegressor(n_init=2, max_iter=5, random_state=0)
+        net.fit(X, y, X_val=Xv, y_val=yv)
+    assert seen[0].k == {"subspace": 0, "arx": 2}[kept]
+
+
 @pytest.mark.parametrize("cls", [TDLRegressor, ISSMRegressor])
 def test_linear_model_is_refined_from_where_its_training_ended(cls):
     # The last run starts at the trained linear model (network output
