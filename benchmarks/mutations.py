@@ -431,26 +431,6 @@ MUTATIONS = (
             "test_linear_fit_clearly_worse_on_training_is_no_candidate",
         ),
     ),
-    Mutation(
-        "run-in never longer",
-        "sysid_nn/_engine/_state_estimation.py",
-        "        run_in *= 2\n",
-        "        break\n",
-        (
-            "tests/test_engine.py::test_lightly_damped_model_simulates_from_its_rest",
-            "tests/test_engine.py::"
-            "test_a_motion_that_still_decays_gets_a_longer_run_in",
-        ),
-    ),
-    Mutation(
-        "run-in longer for any motion",
-        "sysid_nn/_engine/_state_estimation.py",
-        "        if not np.all(settled | (change <= _SETTLING * earlier)):\n",
-        "        if False:\n",
-        (
-            "tests/test_engine.py::test_a_model_that_does_not_settle_in_range_has_no_rest",
-        ),
-    ),
 )
 
 

@@ -215,15 +215,6 @@ def fit_initial_condition(
 _RUN_IN = 8192
 _SETTLED_TAIL = 2048
 _SETTLED_TOL = 1e-6
-#: A run-in still settling (its motion over the last ``_SETTLED_TAIL``
-#: samples under ``_SETTLING`` of that over the ones before) is doubled, up to
-#: this many samples: a lightly damped structure's modes outlast 8192 samples
-#: (three modes of 1 % damping, the slowest of 33 samples a period, moved
-#: 1.2e-5 over the last 2048; started from zero instead of its rest, the
-#: free run of a 1000-sample record from rest missed by 0.32 NRMSE against
-#: 0.043).
-_MAX_RUN_IN = 4 * _RUN_IN
-_SETTLING = 0.5
 
 
 def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
@@ -234,9 +225,7 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     system, at rest, does not have (on Silverbox tens of millivolts over the
     first hundred samples). The rest of a model is where its free run
     settles under zero excitation, the excitation a free run assumes before
-    the first sample: free runs start after ``_RUN_IN`` samples of it, twice
-    as many (up to ``_MAX_RUN_IN``) while the output's motion still decays
-    (a lightly damped structure). No
+    the first sample: free runs start after ``_RUN_IN`` samples of it. No
     rest where the output still moves over the run-in's last
     ``_SETTLED_TAIL`` samples (an integrating or self-oscillating model),
     diverged, or settled outside ``y_range``, the range of the training
@@ -252,8 +241,8 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     None), ``start`` (``"rest"`` or ``"zero"``), ``reason`` (one sentence),
     ``end`` (the output at the end of the run-in; NaN where it diverged),
     ``change`` (per output, the largest distance from ``end`` over the
-    run-in's last ``_SETTLED_TAIL`` samples; inf where it diverged),
-    ``diverged`` and ``run_in`` (the run-in's length).
+    run-in's last ``_SETTLED_TAIL`` samples; inf where it diverged) and
+    ``diverged``.
 
     Examples
     --------
@@ -264,23 +253,12 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     >>> check.start, check.reason
     ('zero', 'still moving over the last 2048 samples of the run-in')
     """
-    run_in = _RUN_IN
-    while True:
-        Y, diverged = free_run(np.zeros((run_in, n_inputs)))
-        tail, before = Y[-_SETTLED_TAIL:], Y[-2 * _SETTLED_TAIL : -_SETTLED_TAIL]
-        end = tail[-1].copy()
-        with np.errstate(invalid="ignore"):
-            change = np.max(np.abs(tail - end), axis=0)
-            earlier = np.max(np.abs(before - before[-1]), axis=0)
-        diverged = bool(diverged) or not np.all(np.isfinite(tail))
-        settled = change <= _SETTLED_TOL
-        if diverged or np.all(settled) or run_in >= _MAX_RUN_IN:
-            break
-        # A decaying motion the run-in did not outlast gets a longer one; a
-        # drift or a swing (an integrator, a self-oscillating model) does not.
-        if not np.all(settled | (change <= _SETTLING * earlier)):
-            break
-        run_in *= 2
+    Y, diverged = free_run(np.zeros((_RUN_IN, n_inputs)))
+    tail = Y[-_SETTLED_TAIL:]
+    end = tail[-1].copy()
+    with np.errstate(invalid="ignore"):
+        change = np.max(np.abs(tail - end), axis=0)
+    diverged = bool(diverged) or not np.all(np.isfinite(tail))
     rest = False
     if diverged:
         end, change = np.full_like(end, np.nan), np.full_like(end, np.inf)
@@ -298,5 +276,4 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
         end=end,
         change=change,
         diverged=diverged,
-        run_in=run_in,
     )

@@ -674,13 +674,11 @@ class _RecurrentRegressorBase(
         too. Returns the sequences and the run-in length of each.
         """
         # (Models fitted before the range was kept have no rest: from zero.)
-        rest, lead = None, 0
+        rest = None
         if at_rest and hasattr(self, "_y_range"):
             fitted = np.array_equal(self.coefs_, self._rest_weights)
-            check = self.rest_check_ if fitted else self._rest_check()
-            rest = self.rest_output_ if fitted else check.output
-            # (Models saved before the run-in's length was kept: the fixed one.)
-            lead = check.get("run_in", _RUN_IN) if rest is not None else 0
+            rest = self.rest_output_ if fitted else self._rest_check().output
+        lead = _RUN_IN if rest is not None else 0
         Xs = [np.concatenate([np.zeros((lead, Xi.shape[1])), Xi]) for Xi in Xs]
         return Xs, np.full(len(Xs), lead, dtype=np.int64)
 
@@ -704,7 +702,7 @@ class _RecurrentRegressorBase(
             tolerance=_SETTLED_TOL * scale,
             training_range=(self._y_range[0] * scale + mean,
                             self._y_range[1] * scale + mean),
-            run_in=check.run_in,
+            run_in=_RUN_IN,
         )  # fmt: skip
 
     def _free_run(self, data: _Data, initial, want_jac: bool = False):

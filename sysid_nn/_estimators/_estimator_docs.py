@@ -190,9 +190,7 @@ rest_check_ : Bunch
     training outputs' range, still moving, or diverged), ``end`` (the output
     after the run-in), ``change`` (its largest change over the run-in's last
     2048 samples) against ``tolerance``, ``training_range`` (lowest and
-    highest training output) and ``run_in`` (the run-in's length: 8192
-    samples, doubled up to 32768 while the output's motion still decays, as
-    a lightly damped structure's does).
+    highest training output) and ``run_in`` (the run-in's length).
 linear_score_ : float or None
     Negative selection loss of that linear model; None where it is not a
     candidate (no hidden layer, no linear part, or the ISSM's TDL start).
