@@ -1,5 +1,5 @@
-"""Small fitted models shared by the tests of saving and export, and a
-lightly damped chain's transfer function."""
+"""Small fitted models shared by the tests of saving and export, a lightly
+damped chain's transfer function, and a spy on the linear candidates."""
 
 import warnings
 
@@ -63,3 +63,20 @@ def modal_chain():
     """The function ``(freqs, zeta) -> (b, a)`` of a lightly damped chain's
     transfer function (a sum of second-order modes)."""
     return _modal_chain
+
+
+@pytest.fixture
+def linear_candidates(monkeypatch):
+    """The linear models the training driver judges networks against, in
+    the order it made them (``linear_candidate`` spied on)."""
+    from sysid_nn._engine import _selection
+
+    seen = []
+    candidate = _selection.linear_candidate
+
+    def spy(*args, **kwargs):
+        seen.append(candidate(*args, **kwargs))
+        return seen[-1]
+
+    monkeypatch.setattr(_selection, "linear_candidate", spy)
+    return seen

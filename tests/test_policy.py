@@ -145,7 +145,9 @@ def test_linear_model_fits_its_training_records_no_worse_than_least_squares():
     assert choose(model, train, train, runs, None, [])[0] is runs[0]
 
 
-def test_networks_linear_model_is_held_to_its_closed_form_fit(monkeypatch):
+def test_networks_linear_model_is_held_to_its_closed_form_fit(
+    monkeypatch, linear_candidates
+):
     # The linear model a network is judged against: trained runs made to
     # validate better but fit the training records ten times worse than
     # they did lose to the closed-form fit, which took no step (the margin
@@ -164,18 +166,12 @@ def test_networks_linear_model_is_held_to_its_closed_form_fit(monkeypatch):
             )
         return restart, run
 
-    seen = []
-    candidate = _selection.linear_candidate
-
-    def spy(*args, **kwargs):
-        seen.append(candidate(*args, **kwargs))
-        return seen[-1]
-
     monkeypatch.setattr(TDLRegressor, "_fit_one", worse_on_training)
-    monkeypatch.setattr(_selection, "linear_candidate", spy)
     monkeypatch.setattr(_selection, "_LINEAR_FIT_MARGIN", np.inf)
     _fit(_small(n_init=1, shooting="free"), X, y)
-    assert seen[0].run.n_iter == 0 and seen[0].run.history == []
+    assert (
+        linear_candidates[0].run.n_iter == 0 and linear_candidates[0].run.history == []
+    )
 
 
 def test_coefs_are_the_best_validated_weights_by_a_clear_margin():

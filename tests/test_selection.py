@@ -115,14 +115,14 @@ def test_issm_linear_candidate_comes_from_its_better_linear_start(monkeypatch):
 
 
 @pytest.mark.parametrize(("ratio", "kept"), [(1.5, "subspace"), (3.0, "arx")])
-def test_linear_fit_clearly_worse_on_training_is_no_candidate(monkeypatch, ratio, kept):
+def test_linear_fit_clearly_worse_on_training_is_no_candidate(
+    monkeypatch, linear_candidates, ratio, kept
+):
     # The linear model trained from the subspace start made to validate
     # better than the one from the ARX start while fitting the training
     # records ``ratio`` times worse: within twice, validation chooses it;
     # beyond, it is no candidate.
     from dataclasses import replace
-
-    from sysid_nn._engine import _selection
 
     (X, y, _), (Xv, yv, _) = (_linear_record(21 + k) for k in range(2))
     fit_one = ISSMRegressor._fit_one
@@ -136,20 +136,12 @@ def test_linear_fit_clearly_worse_on_training_is_no_candidate(monkeypatch, ratio
             run = replace(run, loss=0.01 * loss, criterion=criterion)
         return restart_, run
 
-    seen = []
-    candidate = _selection.linear_candidate
-
-    def spy(*args, **kwargs):
-        seen.append(candidate(*args, **kwargs))
-        return seen[-1]
-
     monkeypatch.setattr(ISSMRegressor, "_fit_one", made)
-    monkeypatch.setattr(_selection, "linear_candidate", spy)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         net = ISSMRegressor(n_init=2, max_iter=5, random_state=0)
         net.fit(X, y, X_val=Xv, y_val=yv)
-    assert seen[0].k == {"subspace": 0, "arx": 2}[kept]
+    assert linear_candidates[0].k == {"subspace": 0, "arx": 2}[kept]
 
 
 @pytest.mark.parametrize("cls", [TDLRegressor, ISSMRegressor])
