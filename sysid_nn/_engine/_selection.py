@@ -76,11 +76,11 @@ _REST_SAMPLES = 3
 #: generated chains of two and three modes of 1-2 % damping, from rest or
 #: cut in motion, the ISSM's fit from the ARX start validated better from
 #: rest in 14 of 24 fits while fitting the training records 2.5-97 times
-#: worse; judged from the networks' way (burn-in, fitted start) it was the
-#: worse one, and with 1 % noise and the record in motion it tested at 0.68
-#: / 0.78 NRMSE against 0.045 / 0.21. Where both fits are sound they were
-#: within 1.8 times (Cascaded Tanks 1.08-1.76, Silverbox 1.04-1.15,
-#: Bouc-Wen 1.00, Wiener-Hammerstein's TDL 1.02).
+#: worse; judged as the networks then were (burn-in, fitted start) it was
+#: the worse one, and with 1 % noise and the record in motion it tested
+#: at 0.68 / 0.78 NRMSE against 0.045 / 0.21. Where both fits are sound
+#: they were within 1.8 times (Cascaded Tanks 1.08-1.76, Silverbox
+#: 1.04-1.15, Bouc-Wen 1.00, Wiener-Hammerstein's TDL 1.02).
 _LINEAR_FIT_MARGIN = 2.0
 #: Scores (standardised mean squared errors) this close are a tie.
 _TIE = 1e-12

@@ -549,8 +549,9 @@ class _RecurrentRegressorBase(
         7.4 mV from rest and 0.24 mV from a fitted start, where the tail
         from rest chose one of 0.32 mV.) The exception is a tail too short
         for the response to its wrong start to die out, of a record that
-        starts at rest: there the continuation is a run from rest (see
-        ``linear_candidate``).
+        starts at rest, or, for a TDL, of any record: there the
+        continuation is a run from rest, or from the record's first
+        measured outputs (see ``linear_candidate``).
         """
         if len(Xs) >= 3:
             n_val = max(1, round(self.validation_fraction * len(Xs)))
