@@ -442,7 +442,8 @@ def continuation(train, val, measured_start: bool = False) -> _Data:
     tail's modelled rows after it, and its training part (``lead``) is run
     but not judged. With ``measured_start`` the record's first measured
     rows are its history rows instead: the run starts from them, as
-    ``simulate(X[h:], initial_outputs=y[:h], initial_inputs=X[:h])`` does.
+    ``simulate(X[h:], initial_outputs=y[h - output_lags_:h],
+    initial_inputs=X[:h])`` does.
     """
     a, b = train.starts[-2], train.starts[-1]
     if measured_start:
