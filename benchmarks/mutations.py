@@ -392,8 +392,8 @@ MUTATIONS = (
     Mutation(
         "record in motion judged from rest on its tail",
         "sysid_nn/_engine/_selection.py",
-        "        if at_rest or not est._estimates_start():\n",
-        "        if at_rest:\n",
+        "        if record_at_rest or not est._estimates_start():\n",
+        "        if record_at_rest:\n",
         (
             "tests/test_selection.py::"
             "test_tail_of_a_record_in_motion_is_judged_from_its_measured_start",

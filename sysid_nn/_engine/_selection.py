@@ -324,17 +324,17 @@ def judgement(est, lin, w: np.ndarray, train, val) -> tuple:
             return window, window, None, fitted  # ``val`` judged so
     if not settled and val.tail and _START_MEMORY < _start_memory(response, val) < 1.0:
         # From rest, the tail shows mostly the response to its wrong
-        # start, which outlasts it; where its record starts at rest, the
-        # free run over the whole record is a run from rest.
+        # start, which outlasts it. Where its record starts at rest, the
+        # free run over the whole record is a run from rest; a TDL's
+        # measured lags are its whole initial state, so from the record's
+        # first measured outputs its run starts right (a flexible arm's
+        # record, in motion at its start: judged from rest on the tail, the
+        # networks tested 4-6 times worse than the linear model that this
+        # judge keeps).
         whole = continuation(train, val)
-        at_rest = starts_at_rest(est, whole)
-        if at_rest or not est._estimates_start():
-            if not at_rest:
-                # A TDL's measured lags are its whole initial state: from
-                # the record's first measured outputs the run starts right
-                # (a flexible arm's record, in motion at its start: judged
-                # from rest on the tail, the networks tested 4-6 times
-                # worse than the linear model that this judge keeps).
+        record_at_rest = starts_at_rest(est, whole)
+        if record_at_rest or not est._estimates_start():
+            if not record_at_rest:
                 whole = continuation(train, val, measured_start=True)
             return 0, 0, whole, validation_loss(lin, w, whole, seg)
     return burn, 0, None, validation_loss(lin, w, replace(val, burn=burn), seg)
