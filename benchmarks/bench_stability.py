@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 from _results import read_rows
-from bench_field import BENCHMARKS, MODELS, run_one
+from bench_field import BENCHMARKS, DEFAULT_MODELS, MODELS, run_one
 
 HERE = Path(__file__).resolve().parent
 CSV = HERE / "results_stability.csv"
@@ -153,7 +153,7 @@ def write_report(path: Path, rows: list[dict]) -> str:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--only", default="cascaded_tanks,emps")
-    parser.add_argument("--models", default=",".join(MODELS))
+    parser.add_argument("--models", default=",".join(DEFAULT_MODELS))
     parser.add_argument("--seeds", default="0,1,2,3,4")
     parser.add_argument(
         "--shifts",

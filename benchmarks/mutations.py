@@ -431,6 +431,36 @@ MUTATIONS = (
             "test_linear_fit_clearly_worse_on_training_is_no_candidate",
         ),
     ),
+    Mutation(
+        "ISSM linear model without its starts",
+        "sysid_nn/_estimators/_issm.py",
+        '        if for_network or self._hidden_layers() or self.init == "tdl":\n',
+        "        if True:\n",
+        (
+            "tests/test_selection.py::"
+            "test_issm_linear_model_keeps_its_start_where_training_fits_worse",
+        ),
+    ),
+    Mutation(
+        "ISSM starts as a network's linear candidates",
+        "sysid_nn/_estimators/_issm.py",
+        '        if for_network or self._hidden_layers() or self.init == "tdl":\n',
+        '        if self._hidden_layers() or self.init == "tdl":\n',
+        (
+            "tests/test_selection.py::"
+            "test_issm_linear_candidate_comes_from_its_better_linear_start",
+        ),
+    ),
+    Mutation(
+        "ISSM start of a closed-form fit",
+        "sysid_nn/_estimators/_issm.py",
+        "        elif restart in self.closed_form_restarts_:",
+        "        elif False:",
+        (
+            "tests/test_selection.py::"
+            "test_issm_linear_model_keeps_its_start_where_training_fits_worse",
+        ),
+    ),
 )
 
 

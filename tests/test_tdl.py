@@ -717,7 +717,7 @@ def test_closed_form_fit_regresses_only_on_measured_lags():
         warnings.simplefilter("ignore")
         model.fit([X[100:] for X in Xs], ys)
     sy, sx = model._y_scale[0], model._x_scale[0]
-    W = model._closed_form_fits()[0][:4] @ model._S
+    W = model._closed_form_fits(for_network=False)[0][1][:4] @ model._S
     coef = np.array([W[0], W[1], W[2] * sy / sx, W[3] * sy / sx])
     np.testing.assert_allclose(coef, [1.5, -0.7, 0.5, 0.2], atol=1e-9)
 

@@ -199,13 +199,13 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
         (lin._fit_one(train, val, new_restart(k), n_stages)[1], k)
         for k in lin._linear_start_restarts()
     ]
-    closed = closed_form_runs(lin, train, val, new_restart)
-    fits += [(run, 0) for run in closed]
+    closed = closed_form_runs(lin, train, val, new_restart, for_network=True)
+    fits += closed
     if val is not None and closed:
         # As a network must fit its training records no worse than the
         # linear model, a trained linear model no worse than its
         # closed-form fits.
-        kept = fitting_no_worse([f[0] for f in fits], min(r.loss for r in closed))
+        kept = fitting_no_worse([f[0] for f in fits], min(r.loss for r, _ in closed))
         fits = [f for f in fits if any(f[0] is r for r in kept)]
     if val is not None:
         # A fit that fits the training records clearly worse than another
@@ -265,24 +265,26 @@ def fits_better(runs: list, bounded: list, linear: LinearCandidate) -> bool:
     return any(ok and r.loss < loss - tie for r, ok in zip(runs, bounded, strict=True))
 
 
-def closed_form_runs(lin, train, val, new_restart) -> list:
+def closed_form_runs(lin, train, val, new_restart, *, for_network: bool) -> list:
     """The closed-form fits of the linear model ``lin`` as they are.
 
-    Each is the run of a fresh restart ``new_restart(0)`` started at the
-    fit and given no stage to run (judged as a trained run is, its
-    criterion the validation loss, or the training loss without
-    validation). They are the candidates other than the linear starts: a
-    TDL fitted to low-passed records (``shooting="free"``) starts there,
-    and its least-squares fit to the measured records is one (a flexible
-    arm's acceleration, 768 samples: test NRMSE 0.62 from the low-passed
-    start, 0.067 for the fit to the measured record).
+    Returns ``(run, k)`` pairs: the run of a fresh restart
+    ``new_restart(k)`` started at the fit and given no stage to run (judged
+    as a trained run is, its criterion the validation loss, or the training
+    loss without validation), ``k`` the restart whose linear start it
+    belongs to. A TDL fitted to low-passed records (``shooting="free"``)
+    starts there, and its least-squares fit to the measured records is one
+    (a flexible arm's acceleration, 768 samples: test NRMSE 0.62 from the
+    low-passed start, 0.067 for the fit to the measured record); the
+    ISSM's are its linear starts as they are, where ``lin`` is fitted as
+    itself, not as a network's linear candidate (``for_network``).
     """
     n_stages = len(lin._stages())
     runs = []
-    for w in lin._closed_form_fits():
-        restart = new_restart(0)
+    for k, w in lin._closed_form_fits(for_network=for_network):
+        restart = new_restart(k)
         restart.w, restart.stage = w, n_stages
-        runs.append(lin._fit_one(train, val, restart, n_stages)[1])
+        runs.append((lin._fit_one(train, val, restart, n_stages)[1], k))
     return runs
 
 

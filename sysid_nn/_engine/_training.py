@@ -288,9 +288,11 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     closed_form = []
     if not est._hidden_layers():
         # A linear model: its closed-form fits are candidates as they are.
-        fits = _selection.closed_form_runs(est, train_data, val, new_restart)
+        fits = _selection.closed_form_runs(
+            est, train_data, val, new_restart, for_network=False
+        )
         closed_form = list(range(len(runs), len(runs) + len(fits)))
-        runs += fits
+        runs += [run for run, _ in fits]
     refined = None
     if linear is not None:
         refined = len(runs)

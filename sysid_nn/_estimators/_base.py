@@ -605,11 +605,12 @@ class _RecurrentRegressorBase(
         measured history rows already are the whole initial condition."""
         return data
 
-    def _closed_form_fits(self) -> list[np.ndarray]:
-        """Weights of a model without hidden layers fitted in closed form,
-        other than its linear starts (which the restarts start from and
-        validation judges already): candidates of the linear model as they
-        are, untrained (see :func:`~sysid_nn._engine._selection.linear_candidate`)."""
+    def _closed_form_fits(self, *, for_network: bool) -> list[tuple[int, np.ndarray]]:
+        """Weights of a model without hidden layers fitted in closed form:
+        candidates of the linear model as they are, untrained (see
+        :func:`~sysid_nn._engine._selection.linear_candidate`), each with
+        the restart whose linear start it belongs to. ``for_network``: as
+        a network's linear candidate, not the estimator's own fit."""
         return []
 
     def _linear_start_restarts(self) -> list[int]:

@@ -122,7 +122,8 @@ closed_form_restarts_ : list of int
     Indices in ``restart_scores_`` of the linear model's closed-form fits,
     judged as they are, untrained (a model without hidden layers; empty
     otherwise): the TDL's least-squares ARX fit to the measured records
-    where its start is fitted to low-passed ones (``shooting="free"``).
+    where its start is fitted to low-passed ones (``shooting="free"``), the
+    ISSM's subspace and ARX starts.
     Their ``training_history_`` is empty.
 best_stage_ : int
     Training stage in which the chosen weights were seen (an index into

@@ -527,11 +527,11 @@ such, default=None
     def _initial_params(self, rng):
         return self._weights_at(self._arx, rng)
 
-    def _closed_form_fits(self) -> list[np.ndarray]:
+    def _closed_form_fits(self, *, for_network: bool) -> list[tuple[int, np.ndarray]]:
         # The least-squares ARX fit to the measured records' measured rows.
         if self._hidden_layers():
             return []
-        return [self._weights_at(self._arx_measured, np.random.RandomState(0))]
+        return [(0, self._weights_at(self._arx_measured, np.random.RandomState(0)))]
 
     def _weights_at(self, arx: np.ndarray, rng) -> np.ndarray:
         """Network weights drawn by ``rng``, the linear part at ``arx``."""
