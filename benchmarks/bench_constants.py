@@ -28,7 +28,9 @@ Each cell is the median (range) of the fits over the cases and the seeds;
 ``L`` the linear model. Fits identical to those of the first value are
 counted in ``same``.
 
-Run: ``python benchmarks/bench_constants.py _training._REFINE_SCALE
+Run: ``python benchmarks/bench_constants.py`` for every sweep of
+:data:`SWEEPS` (about an hour on 2 cores; ``results_constants.md``), or
+one constant, ``python benchmarks/bench_constants.py _training._REFINE_SCALE
 0.1,0.03,0.3 [--systems chains,oscillator] [--seeds 0,1,2] [--data-home
 DIR] [--record FILE] [--out results.md]`` (the first value should be the
 constant's own).
@@ -59,6 +61,12 @@ from sysid_nn.metrics import nrmse
 
 MODELS = {"TDLRegressor()": TDLRegressor, "ISSMRegressor()": ISSMRegressor}
 SYSTEMS = ("cascaded_tanks", "emps", "chains", "oscillator")
+#: The constants swept by default, each with its own value first.
+SWEEPS = {
+    "_training._REFINE_SCALE": "0.1,0.03,0.3",
+    "_training._REFINE_BUDGET": "5,2,10",
+    "_training._EXTRA_BATCHES": "1,0",
+}
 
 
 def _rmse(model, X, y, skip: int = 0) -> float:
@@ -204,8 +212,12 @@ def report(constant: str, values, rows, wall: float) -> str:
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("constant", help="module.NAME in sysid_nn._engine")
-    parser.add_argument("values", help="comma-separated, the constant's own first")
+    parser.add_argument(
+        "constant", nargs="?", help="module.NAME in sysid_nn._engine (default: SWEEPS)"
+    )
+    parser.add_argument(
+        "values", nargs="?", help="comma-separated, the constant's own first"
+    )
     parser.add_argument("--systems", default=",".join(SYSTEMS))
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--data-home", default=None, help="data directory")
@@ -218,14 +230,23 @@ def main(argv=None) -> int:
         parser.error(f"unknown systems: {', '.join(sorted(unknown))}")
     if args.record:
         systems.append("record")
-    values = args.values.split(",")
+    if args.constant and not args.values:
+        parser.error(f"give the values to set {args.constant} to")
+    sweeps = {args.constant: args.values} if args.constant else SWEEPS
     seeds = [int(s) for s in args.seeds.split(",")]
-    start = time.perf_counter()
-    rows = run(args.constant, values, systems, seeds, args.data_home, args.record)
-    text = report(args.constant, values, rows, time.perf_counter() - start)
-    print(text)
-    if args.out:
-        Path(args.out).write_text(text)
+    texts = []
+    for constant, values in sweeps.items():
+        values = values.split(",")
+        start = time.perf_counter()
+        rows = run(constant, values, systems, seeds, args.data_home, args.record)
+        texts.append(report(constant, values, rows, time.perf_counter() - start))
+    text = "\n".join(texts)
+    if args.constant:
+        print(text)
+        if args.out:
+            Path(args.out).write_text(text)
+    else:
+        P.write_report(text, args.out, "results_constants.md")
     return 0
 
 
