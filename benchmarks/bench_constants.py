@@ -29,7 +29,7 @@ Each cell is the median (range) of the fits over the cases and the seeds;
 counted in ``same``.
 
 Run: ``python benchmarks/bench_constants.py`` for every sweep of
-:data:`SWEEPS` (about an hour on 2 cores; ``results_constants.md``), or
+:data:`SWEEPS` (about 80 minutes on 2 cores; ``results_constants.md``), or
 one constant, ``python benchmarks/bench_constants.py _training._REFINE_SCALE
 0.1,0.03,0.3 [--systems chains,oscillator] [--seeds 0,1,2] [--data-home
 DIR] [--record FILE] [--out results.md]`` (the first value should be the
@@ -66,6 +66,7 @@ SWEEPS = {
     "_training._REFINE_SCALE": "0.1,0.03,0.3",
     "_training._REFINE_BUDGET": "5,2,10",
     "_training._EXTRA_BATCHES": "1,0",
+    "_selection._SETTLED": "0.001,0.01,0.0001",
 }
 
 
@@ -159,7 +160,7 @@ def run(constant: str, values, systems, seeds, data_home=None, record=None):
                             )
                             row = dict(
                                 system=system, case=label, model=model_name,
-                                seed=seed, value=value, test=test, cpu=cpu,
+                                seed=seed, value=value, test=float(test), cpu=cpu,
                                 returned="R" if refined else (
                                     "L" if model.selected_ == "linear" else "N"
                                 ),
@@ -183,10 +184,10 @@ def report(constant: str, values, rows, wall: float) -> str:
         f"{P.load_range(rows)} on 2 cores). Median (range) of test errors "
         "over the cases and seeds; `R` / `L`: fits that returned the "
         "refinement / the linear model; `same`: fits identical to the first "
-        "value's.",
+        "value's; CPU-s: median CPU time of a fit on one core.",
         "",
-        "| system | model | fits | " + " | ".join(values) + " |",
-        "|---|---|---|" + "---|" * len(values),
+        "| system | model | fits | " + " | ".join(values) + " | CPU-s |",
+        "|---|---|---|" + "---|" * len(values) + "---|",
     ]
     groups = {}
     for r in rows:
@@ -204,8 +205,11 @@ def report(constant: str, values, rows, wall: float) -> str:
                 f" {sum(r['returned'] == k for r in mine)}{k}" for k in "RL"
             )
             cells.append(f"{P.median_range(tests)};{counts}; same {same}")
+        cpu = np.median([r["cpu"] for r in group])
         lines.append(
-            f"| {system} | {model} | {len(first)} | " + " | ".join(cells) + " |"
+            f"| {system} | {model} | {len(first)} | "
+            + " | ".join(cells)
+            + f" | {cpu:.1f} |"
         )
     return "\n".join(lines) + "\n"
 
