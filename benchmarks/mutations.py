@@ -308,7 +308,7 @@ MUTATIONS = (
     Mutation(
         "linear candidate without its closed-form fits",
         "sysid_nn/_engine/_selection.py",
-        "    fits += [(run, 0) for run in closed]\n",
+        "    fits += closed\n",
         "",
         (f"{POLICY}::test_networks_linear_model_is_held_to_its_closed_form_fit",),
     ),
