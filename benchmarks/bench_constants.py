@@ -13,9 +13,10 @@ errors side by side. Systems:
   passed as ``X_val`` (``split+25``); test RMSE of the free run from rest
   after the initialisation window;
 * ``chains``: the lightly damped two-mode chain of
-  :mod:`bench_linear` (2 % damping, 1024 samples of white excitation),
-  clean and with 1 % output noise, from rest and cut 500 samples into its
-  response; test NRMSE on a record of 1000 samples;
+  :mod:`bench_linear` (2 % damping, 1024 samples of white excitation, one
+  realisation: the seeds are the fits'), clean and with 1 % output noise,
+  from rest and cut 500 samples into its response; test NRMSE on a record
+  of 1000 samples;
 * ``oscillator``: the hysteretic oscillator of the accuracy benchmark's
   protocol P1 (one record of 2000 samples, two validation records), clean
   and with 1 % and 3 % output noise (:mod:`bench_oracle`'s records);
