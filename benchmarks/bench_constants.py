@@ -30,7 +30,7 @@ Each cell is the median (range) of the fits over the cases and the seeds;
 counted in ``same``.
 
 Run: ``python benchmarks/bench_constants.py`` for every sweep of
-:data:`SWEEPS` (about two hours on 2 cores; ``results_constants.md``), or
+:data:`SWEEPS` (about three hours on 2 cores; ``results_constants.md``), or
 one constant, ``python benchmarks/bench_constants.py _training._REFINE_SCALE
 0.1,0.03,0.3 [--systems chains,oscillator] [--seeds 0,1,2] [--data-home
 DIR] [--record FILE] [--out results.md]`` (the first value should be the
@@ -70,6 +70,8 @@ SWEEPS = {
     "_selection._SETTLED": "0.001,0.01,0.0001",
     "_selection._MAX_BURN_SHARE": "0.5,0.3,0.7",
     "_selection._START_WINDOW": "50,20,100",
+    "_selection._FITTED_START_GAIN": "0.5,0.25,0.75",
+    "_selection._AMPLITUDE_MARGIN": "2,1.5,3",
 }
 
 
