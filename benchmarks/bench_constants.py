@@ -54,11 +54,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _protocol as P
 import bench_oracle
-from bench_field import BENCHMARKS
+from bench_field import BENCHMARKS, _fit
 from bench_linear import N_TEST, chain
 
 from sysid_nn import ISSMRegressor, TDLRegressor
-from sysid_nn.metrics import nrmse
 
 MODELS = {"TDLRegressor()": TDLRegressor, "ISSMRegressor()": ISSMRegressor}
 SYSTEMS = ("cascaded_tanks", "emps", "chains", "oscillator")
@@ -87,18 +86,13 @@ def cases(system: str, data_home=None, record=None):
     fits it, ``score(model)`` is its test error."""
     if system in ("cascaded_tanks", "emps"):
         data = BENCHMARKS[system][0](data_home=data_home)
-        X, y = data.X_train[0], data.y_train[0]
-        n = round(0.8 * len(y)) + 25
 
         def score(m):
             return _rmse(m, data.X_test[0], data.y_test[0], data.n_skip)
 
-        yield "tail", lambda m: m.fit(X, y), score
-        yield (
-            "split+25",
-            lambda m: m.fit(X[:n], y[:n], X_val=X[n:], y_val=y[n:]),
-            score,
-        )
+        # The field benchmarks' own protocols (see bench_field._fit).
+        yield "tail", lambda m: _fit(m, data, "tail"), score
+        yield "split+25", lambda m: _fit(m, data, "split", 25), score
     elif system == "chains":
         b, a = chain((0.04, 0.11), 0.02)
         for lead in (0, 500):
@@ -128,9 +122,8 @@ def cases(system: str, data_home=None, record=None):
         data = np.loadtxt(record)
         u, y, n = data[:, :1], data[:, 1], 768
 
-        def score(m):
-            sim = np.ravel(m.simulate(u))
-            return float(nrmse(y[n:], sim[n:])) if np.all(np.isfinite(sim)) else np.inf
+        def score(m):  # the free run over the whole record, on its rest
+            return _rmse(m, u, y, n) / y[n:].std()
 
         yield Path(record).name, lambda m: m.fit(u[:n], y[:n]), score
 
