@@ -362,8 +362,8 @@ MUTATIONS = (
     Mutation(
         "refinement never preferred",
         "sysid_nn/_engine/_selection.py",
-        "            best = ref\n",
-        "            pass\n",
+        "                best = ref\n",
+        "                pass\n",
         (
             "tests/test_selection.py::"
             "test_refinement_kept_unless_a_restart_validates_clearly_better",
@@ -372,11 +372,21 @@ MUTATIONS = (
     Mutation(
         "refinement always preferred",
         "sysid_nn/_engine/_selection.py",
-        "and not clearly_better(est, best.w, ref.w, val, est._final_segment())",
-        "and True",
+        "if not advantage > _SIGNIFICANT:",
+        "if True:",
         (
             "tests/test_selection.py::"
             "test_refinement_kept_unless_a_restart_validates_clearly_better",
+        ),
+    ),
+    Mutation(
+        "refinement comparison not reported",
+        "sysid_nn/_engine/_training.py",
+        "        refinement_advantage=advantage,\n",
+        "",
+        (
+            "tests/test_selection.py::"
+            "test_refinement_comparison_is_a_fitted_attribute_that_decides",
         ),
     ),
     Mutation(
@@ -386,7 +396,7 @@ MUTATIONS = (
         "lag = 0",
         (
             "tests/test_selection.py::"
-            "test_clearly_better_allows_for_autocorrelated_errors",
+            "test_validation_advantage_allows_for_autocorrelated_errors",
         ),
     ),
     Mutation(

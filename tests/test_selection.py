@@ -234,8 +234,10 @@ def test_refinement_reports_the_start_of_its_linear_model(monkeypatch):
     def refinement_wins(
         est, train, val, runs, linear, closed_form=(), retry=False, refined=None
     ):
-        _, _, bounded, excursions = choose(est, train, val, runs, linear, closed_form)
-        return runs[-1], "restart", bounded, excursions
+        _, _, bounded, excursions, _ = choose(
+            est, train, val, runs, linear, closed_form
+        )
+        return runs[-1], "restart", bounded, excursions, None
 
     monkeypatch.setattr(ISSMRegressor, "_fit_one", spy)
     monkeypatch.setattr(_selection, "choose", refinement_wins)
@@ -261,7 +263,7 @@ def test_network_that_beats_the_linear_model_is_kept():
     assert net.linear_score_ < net.restart_scores_.max()
 
 
-def _replayed_choice(net):
+def _replayed_choice(net, significant=2.0):
     """``(selected_, best_restart_)`` recomputed from the fitted evidence."""
     k_all = np.arange(net.n_restarts_)
     pool = k_all[net.restart_bounded_] if net.restart_bounded_.any() else k_all
@@ -271,6 +273,15 @@ def _replayed_choice(net):
     if pool.size == 0:
         return "linear", None
     best = int(pool[np.argmax(net.restart_scores_[pool])])
+    if net.refinement_advantage_ is not None:
+        # The refinement, a candidate beating the linear model, against the
+        # best restart: kept unless the restart is ahead beyond
+        # ``significant`` standard errors.
+        ref = net.refined_restart_
+        assert ref in pool and best != ref
+        assert net.restart_scores_[ref] > net.linear_score_
+        if not net.refinement_advantage_ > significant:
+            best = ref
     if net.linear_score_ is None or net.restart_scores_[best] > net.linear_score_:
         return "restart", best
     return "linear", None
@@ -305,6 +316,30 @@ def test_the_choice_among_restarts_is_explained_by_fitted_attributes(monkeypatch
     np.testing.assert_array_equal(held.restart_scores_, net.restart_scores_)
     assert held.best_restart_ != winner
     assert (held.selected_, held.best_restart_) == _replayed_choice(held)
+
+
+def test_refinement_comparison_is_a_fitted_attribute_that_decides(monkeypatch):
+    # The restart that validates best is ahead of the refinement of the
+    # linear model by a reported number of standard errors; the choice
+    # follows it: with the threshold just above it the refinement is kept.
+    from sysid_nn._engine import _selection
+
+    (X, y, _), (Xv, yv, _) = (_linear_record(s) for s in (0, 1))
+    y, yv = np.tanh(2 * y), np.tanh(2 * yv)
+    params = dict(n_init=3, max_iter=30, random_state=0)
+    net = TDLRegressor(**params).fit(X, y, X_val=Xv, y_val=yv)
+    ahead = net.refinement_advantage_
+    assert ahead > _selection._SIGNIFICANT
+    assert net.best_restart_ not in (None, net.refined_restart_)
+    assert (net.selected_, net.best_restart_) == _replayed_choice(net)
+    monkeypatch.setattr(_selection, "_SIGNIFICANT", ahead + 1e-9)
+    held = TDLRegressor(**params).fit(X, y, X_val=Xv, y_val=yv)
+    assert held.refinement_advantage_ == ahead
+    assert held.best_restart_ == held.refined_restart_
+    assert (held.selected_, held.best_restart_) == _replayed_choice(held, ahead + 1e-9)
+    # No comparison without validation records.
+    alone = TDLRegressor(early_stopping=False, **params).fit(X, y)
+    assert alone.refinement_advantage_ is None
 
 
 def test_validation_record_from_rest_judges_as_the_tail_within_the_record():
@@ -434,7 +469,7 @@ def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
         _run(bad, 0.0, 0.5),
         _run(good, 0.0, 1.0),
     ]
-    chosen, selected, bounded, _ = choose(model, train, None, runs, None)
+    chosen, selected, bounded, *_ = choose(model, train, None, runs, None)
     assert chosen.w is good
     assert selected == "restart"
     assert bounded == [False, True]
@@ -476,9 +511,10 @@ def test_refinement_kept_unless_a_restart_validates_clearly_better():
     # candidates; the restart is kept only where its validation error is
     # lower beyond the validation's noise.
     from sysid_nn._engine._selection import (
+        _SIGNIFICANT,
         LinearCandidate,
         choose,
-        clearly_better,
+        validation_advantage,
         validation_loss,
     )
 
@@ -502,19 +538,21 @@ def test_refinement_kept_unless_a_restart_validates_clearly_better():
     for scale, kept in ((1e-4, "refinement"), (0.03, "restart")):
         refinement = run(w + scale * drift)
         assert restart.criterion < refinement.criterion < linear.run.criterion
-        better = clearly_better(model, restart.w, refinement.w, val, seg)
-        assert better == (kept == "restart")
-        chosen, selected, *_ = choose(
+        ahead = validation_advantage(model, restart.w, refinement.w, val, seg)
+        assert (ahead > _SIGNIFICANT) == (kept == "restart")
+        chosen, selected, *_, advantage = choose(
             model, train, val, [restart, refinement], linear, refined=1
         )
-        assert selected == "restart"
+        assert selected == "restart" and advantage == ahead
         assert chosen is (refinement if kept == "refinement" else restart)
-    # Without a refinement, or without validation records, the best is kept.
+    # Without a refinement, or without validation records, the best is kept
+    # and no comparison is reported.
     refinement = run(w + 1e-4 * drift)
-    assert choose(model, train, val, [restart, refinement], linear)[0] is restart
+    chosen, *_, advantage = choose(model, train, val, [restart, refinement], linear)
+    assert chosen is restart and advantage is None
 
 
-def test_clearly_better_allows_for_autocorrelated_errors(monkeypatch):
+def test_validation_advantage_allows_for_autocorrelated_errors(monkeypatch):
     # Free-run errors drift: the same mean difference is clear where the
     # per-sample differences are independent and not where they wander.
     from sysid_nn._engine import _selection
@@ -535,7 +573,8 @@ def test_clearly_better_allows_for_autocorrelated_errors(monkeypatch):
             ),
         )
         val = SimpleNamespace(starts=np.array([0, n]), judged=np.arange(n))
-        assert _selection.clearly_better(None, 0, 1, val, 1) == clear
+        ahead = _selection.validation_advantage(None, 0, 1, val, 1)
+        assert (ahead > _selection._SIGNIFICANT) == clear
 
 
 def test_linear_candidate_is_scored_on_the_restarts_objective():
@@ -794,7 +833,7 @@ def test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen(monkeypa
     # Settling further out on the linear model's side is not judged.
     assert ratios[2] == 0.0
     runs = [wrong, swinging, steeper]
-    chosen, selected, bounded, excursions = choose(model, train, train, runs, linear)
+    chosen, selected, bounded, excursions, _ = choose(model, train, train, runs, linear)
     assert chosen is steeper
     assert selected == "restart"
     assert bounded == [False, False, True]

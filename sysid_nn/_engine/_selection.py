@@ -25,7 +25,7 @@
   embedded in the network's own weights (network output silent, linear
   part = the linear model), with a warning. The refinement of the linear
   model is kept over a restart that validates better unless the restart is
-  :func:`clearly_better`.
+  ahead beyond the validation's noise (:func:`validation_advantage`).
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ _LINEAR_FIT_MARGIN = 2.0
 _TIE = 1e-12
 #: The refinement of the linear model is kept over a restart that validates
 #: better unless the restart's validation error is lower by more than this
-#: many standard errors of the difference (see :func:`clearly_better`). On
+#: many standard errors of the difference (see :func:`validation_advantage`). On
 #: Cascaded Tanks (ISSM and TDL, ``random_state`` 0-4, the last fifth and
 #: the split moved by 10 or 25 samples) the refinement tested better than the
 #: restart that validated better in 7 of the 8 fits where both were
@@ -504,30 +504,31 @@ def validation_residuals(est, w: np.ndarray, val, seg: int = _FREE_RUN):
     return Yhat[val.judged] - val.Y[val.judged]
 
 
-def clearly_better(est, w: np.ndarray, than: np.ndarray, val, seg: int) -> bool:
-    """Whether ``w`` validates better than ``than`` beyond the validation's noise.
+def validation_advantage(est, w: np.ndarray, than: np.ndarray, val, seg: int) -> float:
+    """How many standard errors ``w`` validates better than ``than``.
 
     The per-row difference of the squared errors (mean over the outputs),
-    ``than``'s minus ``w``'s, must average more than ``_SIGNIFICANT``
-    standard errors above zero: the Diebold-Mariano (1995) comparison of two
-    forecasts' accuracy that :func:`~sysid_nn.nonlinearity_test` makes, its
-    standard error robust to the autocorrelation of free-run errors
-    (Newey-West, within each validation record, over the square root of a
-    record's judged rows in lags: with the test's own plug-in lag, up to
-    half a record, an EMPS restart ahead by 7.8 standard errors at this lag
-    was ahead by 1.8, and lost to the refinement that tested at 7.2
-    against its 6.3 mm).
+    ``than``'s minus ``w``'s, over its standard error: the Diebold-Mariano
+    (1995) comparison of two forecasts' accuracy that
+    :func:`~sysid_nn.nonlinearity_test` makes, its standard error robust to
+    the autocorrelation of free-run errors (Newey-West, within each
+    validation record, over the square root of a record's judged rows in
+    lags: with the test's own plug-in lag, up to half a record, an EMPS
+    restart ahead by 7.8 standard errors at this lag was ahead by 1.8, and
+    lost to the refinement that tested at 7.2 against its 6.3 mm). Infinite
+    where one of the two free runs diverges or there is a single row (its
+    sign then says which is ahead), 0 where they are equal.
     """
     ours, theirs = (validation_residuals(est, v, val, seg) for v in (w, than))
     if ours is None or theirs is None:
-        return theirs is None and ours is not None
+        return np.inf if theirs is None and ours is not None else -np.inf
     d = np.mean(theirs**2, axis=1) - np.mean(ours**2, axis=1)
     record = np.searchsorted(val.starts, val.judged, side="right")
     bounds = np.concatenate([[0], np.flatnonzero(np.diff(record)) + 1, [len(d)]])
     if len(d) < 2 or np.all(d == 0):
-        return bool(d.sum() > 0)
+        return float(np.sign(d.sum()) * np.inf) if d.sum() else 0.0
     lag = int(np.sqrt(len(d) / (len(bounds) - 1)))
-    return bool(loss_differential_statistic(d, bounds, lag) > _SIGNIFICANT)
+    return float(loss_differential_statistic(d, bounds, lag))
 
 
 def bounded_beyond_range(est, w: np.ndarray, train) -> bool:
@@ -640,7 +641,9 @@ def choose(
     refined: int | None = None,
 ):
     """The run ``fit`` keeps, what it is and the evidence: ``(run,
-    "restart" | "linear", bounded, excursions)``, a flag and a ratio per run.
+    "restart" | "linear", bounded, excursions, advantage)``, a flag and a
+    ratio per run, and how many standard errors the best restart validated
+    better than the refinement where the two were compared (None where not).
 
     Restarts whose free run diverges beyond the training range, or whose
     free runs under constant inputs within it settle far out on the wrong
@@ -653,7 +656,8 @@ def choose(
     training records better, :func:`fits_better`: the caller runs more
     restarts). The run ``refined`` indexes (the linear model's refinement)
     is kept over the best where it is a candidate, beats the linear model
-    and the best is not :func:`clearly_better`. A linear model's own runs
+    and the best is not ahead of it by more than ``_SIGNIFICANT`` standard
+    errors (:func:`validation_advantage`). A linear model's own runs
     (``linear`` None) are held, with validation records, to the training
     loss of its closed-form fits, the runs ``closed_form`` indexes.
     """
@@ -671,13 +675,15 @@ def choose(
             # closed-form fits (the runs ``closed_form`` indexes).
             reference = min(runs[k].loss for k in closed_form)
             pool = fitting_no_worse(pool, reference) or pool
-        return min(pool, key=lambda r: r.criterion), "restart", bounded, excursions
+        best = min(pool, key=lambda r: r.criterion)
+        return best, "restart", bounded, excursions, None
     lin = linear.run
     # ``loss``: the final objective on the training records (the free run
     # where the focus is simulation), alike for both.
     fitting = fitting_no_worse(pool, lin.loss) if val is not None else pool
     worse = len(pool) - len(fitting)
     best = min(fitting, key=lambda r: r.criterion) if fitting else None
+    advantage = None
     if best is not None and val is not None and refined is not None:
         # The refinement of the linear model, where it is a candidate and
         # beats the linear model, unless a restart is clearly better.
@@ -686,13 +692,15 @@ def choose(
             best is not ref
             and any(r is ref for r in fitting)
             and ref.criterion < lin.criterion
-            and not clearly_better(est, best.w, ref.w, val, est._final_segment())
         ):
-            best = ref
+            seg = est._final_segment()
+            advantage = validation_advantage(est, best.w, ref.w, val, seg)
+            if not advantage > _SIGNIFICANT:
+                best = ref
     if best is not None and (
         best.criterion < lin.criterion or not np.isfinite(lin.criterion)
     ):
-        return best, "restart", bounded, excursions
+        return best, "restart", bounded, excursions, advantage
     # Ties within rounding: runs that never left the linear model (the
     # refinement of the linear model that found no better weights), or
     # exact fits alike.
@@ -700,12 +708,12 @@ def choose(
     left = [r for r in fitting if r.criterion - lin.criterion > tie]
     if best is not None and not left:
         # No run left the linear model: nothing to warn about.
-        return replace(lin, w=linear.w), "linear", bounded, excursions
+        return replace(lin, w=linear.w), "linear", bounded, excursions, advantage
     if left:
         best = min(left, key=lambda r: r.criterion)
     if retry and not fits_better(runs, bounded, linear):
         # Training stopped short: the caller runs more restarts first.
-        return replace(lin, w=linear.w), "linear", bounded, excursions
+        return replace(lin, w=linear.w), "linear", bounded, excursions, advantage
     if best is None:
         what = (
             f"no trained network fitted the training records better (the "
@@ -740,4 +748,4 @@ def choose(
         UserWarning,
         stacklevel=user_stacklevel(),
     )
-    return replace(lin, w=linear.w), "linear", bounded, excursions
+    return replace(lin, w=linear.w), "linear", bounded, excursions, advantage

@@ -237,6 +237,10 @@ class Training:
     #: The index of the run that refined the linear model (None without one;
     #: see :func:`refine_linear`).
     refined: int | None = None
+    #: How many standard errors the best restart validated better than the
+    #: refinement, where the two were compared (see
+    #: :func:`sysid_nn._engine._selection.choose`); None where not.
+    refinement_advantage: float | None = None
     #: The indices of the runs that are closed-form fits of a linear model,
     #: untrained (see :func:`sysid_nn._engine._selection.closed_form_runs`).
     closed_form: list = field(default_factory=list)
@@ -300,7 +304,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     batches = 1
     while True:
         retry = batches <= _EXTRA_BATCHES and linear is not None
-        best, chosen, selected, bounded, excursions = choose_restart(
+        best, chosen, selected, bounded, excursions, advantage = choose_restart(
             est, train_data, val, runs, linear, closed_form, retry, refined
         )
         if (
@@ -335,6 +339,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         bounded=bounded,
         excursions=excursions,
         refined=refined,
+        refinement_advantage=advantage,
         closed_form=closed_form,
         validation=val,
         batches=batches,
@@ -402,8 +407,9 @@ def choose_restart(
     refined: int | None = None,
 ):
     """The run whose weights ``fit`` returns: ``(index, run, selected,
-    bounded, excursions)``, ``bounded`` whether each run's free run stays
-    bounded, ``excursions`` its constant-input excursion over its bound.
+    bounded, excursions, advantage)``, ``bounded`` whether each run's free
+    run stays bounded, ``excursions`` its constant-input excursion over its
+    bound, ``advantage`` the best restart's over the refinement (or None).
 
     Among the restarts whose free run stays bounded beyond the training
     range, the one with the lowest criterion (the validation loss of its
@@ -412,11 +418,11 @@ def choose_restart(
     it beats the linear model; else the linear model (``index`` None,
     ``selected`` ``"linear"``). See :func:`sysid_nn._engine._selection.choose`.
     """
-    chosen, selected, bounded, excursions = _selection.choose(
+    chosen, selected, bounded, excursions, advantage = _selection.choose(
         est, train_data, val, runs, linear, closed_form, retry, refined
     )
     index = next((k for k, r in enumerate(runs) if r is chosen), None)
-    return index, chosen, selected, bounded, excursions
+    return index, chosen, selected, bounded, excursions, advantage
 
 
 def fallback(est, w: np.ndarray, train_data: _Data, val: _Data | None):

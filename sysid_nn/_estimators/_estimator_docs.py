@@ -118,6 +118,15 @@ refined_restart_ : int or None
     model is no candidate):
     it starts at the linear model with small hidden weights and runs the
     final stage of the schedule only, with five times ``max_iter``.
+refinement_advantage_ : float or None
+    Where the refinement and a restart that validated better were both
+    candidates (each beating the linear model and fitting the training
+    records no worse than it), how many standard errors of the difference
+    the restart's validation error was lower (the Diebold-Mariano
+    statistic, its standard error robust to the free runs'
+    autocorrelation): the restart is kept only above 2, else the
+    refinement. Infinite where a free run diverged; None where no such
+    comparison was made.
 closed_form_restarts_ : list of int
     Indices in ``restart_scores_`` of the linear model's closed-form fits,
     judged as they are, untrained (a model without hidden layers; empty

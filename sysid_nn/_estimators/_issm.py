@@ -631,6 +631,7 @@ default=None
                 "n_restarts_",
                 "best_restart_",
                 "refined_restart_",
+                "refinement_advantage_",
                 "best_stage_",
                 "training_history_",
                 "loss_curve_",
