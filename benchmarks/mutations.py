@@ -471,6 +471,36 @@ MUTATIONS = (
             "test_issm_linear_model_keeps_its_start_where_training_fits_worse",
         ),
     ),
+    Mutation(
+        "ensemble of means",
+        "sysid_nn/_estimators/_ensemble.py",
+        "return np.nanmedian(stacked, axis=0)",
+        "return np.nanmean(stacked, axis=0)",
+        (
+            "tests/test_ensemble.py::"
+            "test_runs_are_the_pointwise_median_of_the_finite_members",
+        ),
+    ),
+    Mutation(
+        "ensemble members with diverged runs counted",
+        "sysid_nn/_estimators/_ensemble.py",
+        "    stacked[~np.isfinite(stacked)] = np.nan\n",
+        "",
+        (
+            "tests/test_ensemble.py::"
+            "test_runs_are_the_pointwise_median_of_the_finite_members",
+        ),
+    ),
+    Mutation(
+        "ensemble members on one held-out share",
+        "sysid_nn/_estimators/_ensemble.py",
+        '                params["validation_fraction"] = share\n',
+        "                pass\n",
+        (
+            "tests/test_ensemble.py::"
+            "test_members_are_the_fits_of_their_seeds_and_held_out_shares",
+        ),
+    ),
 )
 
 

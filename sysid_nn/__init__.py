@@ -31,6 +31,7 @@ _LAZY = {
     "TDLRegressor": "sysid_nn._estimators._tdl",
     "ISSMRegressor": "sysid_nn._estimators._issm",
     "DivergenceWarning": "sysid_nn._exceptions",
+    "EnsembleRegressor": "sysid_nn._estimators._ensemble",
     "InconsistentVersionWarning": "sysid_nn._exceptions",
     "UnstablePredictorWarning": "sysid_nn._estimators._issm",
     "load_model": "sysid_nn._saved",
@@ -46,6 +47,7 @@ _LAZY = {
 
 __all__ = [
     "DivergenceWarning",
+    "EnsembleRegressor",
     "HystereticOscillator",
     "ISSMRegressor",
     "InconsistentVersionWarning",

@@ -885,14 +885,7 @@ default=None
         score : float
             R^2 averaged uniformly over outputs.
         """
-        from sklearn.metrics import r2_score
-
-        y_pred = self.predict(X)
-        y_true = np.concatenate(y) if is_sequence_list(y) else y
-        y_pred = np.concatenate(y_pred) if isinstance(y_pred, list) else y_pred
-        if not np.all(np.isfinite(y_pred)):
-            return -np.inf
-        return r2_score(y_true, y_pred, sample_weight=sample_weight)
+        return free_run_r2(self.predict(X), y, sample_weight)
 
     @abstractmethod
     def _initial_layout(self) -> tuple[tuple[int, ...], str, str]:
@@ -929,3 +922,15 @@ default=None
                 diverged[s] = bad[0]
                 block[bad[0] :] = np.nan
         self._warn_divergence(diverged, as_list, what)
+
+
+def free_run_r2(y_pred, y, sample_weight=None) -> float:
+    """R^2 of a free run ``y_pred`` against the measured ``y`` over all
+    samples of all sequences; ``-inf`` where the run is not finite."""
+    from sklearn.metrics import r2_score
+
+    y_true = np.concatenate(y) if is_sequence_list(y) else y
+    y_pred = np.concatenate(y_pred) if isinstance(y_pred, list) else y_pred
+    if not np.all(np.isfinite(y_pred)):
+        return -np.inf
+    return r2_score(y_true, y_pred, sample_weight=sample_weight)

@@ -1,0 +1,126 @@
+"""EnsembleRegressor: members on their own seeds and held-out shares, and
+the pointwise median of their runs."""
+
+import numpy as np
+import pytest
+from sklearn.base import clone
+from sklearn.utils.estimator_checks import parametrize_with_checks
+
+from sysid_nn import EnsembleRegressor, ISSMRegressor, TDLRegressor
+from sysid_nn._estimators._base import free_run_r2
+
+ROW_ORDER_CHECKS = {
+    "check_methods_subset_invariance": (
+        "rows are consecutive time steps of one experiment: a subset of rows is "
+        "a different experiment with different initial conditions"
+    ),
+    "check_methods_sample_order_invariance": (
+        "rows are consecutive time steps: reordering them changes the dynamics"
+    ),
+}
+
+
+def _record(seed, n=300):
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal((n, 1))
+    y = np.convolve(u[:, 0], [0.0, 0.5, 0.25])[:n]
+    return u, np.tanh(y) + 0.01 * rng.standard_normal(n)
+
+
+def _net(**params):
+    return TDLRegressor(
+        output_lags=2, input_lags=2, hidden_layer_sizes=(3,), n_init=1,
+        max_iter=5, **params,
+    )  # fmt: skip
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+@parametrize_with_checks(
+    [EnsembleRegressor(_net(), n_members=2)],
+    expected_failed_checks=lambda est: ROW_ORDER_CHECKS,
+)
+def test_sklearn_compatible(estimator, check):
+    check(estimator)
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+def test_members_are_the_fits_of_their_seeds_and_held_out_shares():
+    X, y = _record(0)
+    ensemble = EnsembleRegressor(
+        _net(), n_members=3, validation_fractions=(0.2, 0.3), random_state=0
+    ).fit(X, y)
+    assert ensemble.member_validation_fractions_ == [0.2, 0.3, 0.2]
+    assert len(set(ensemble.member_random_states_)) == 3
+    for member, seed, share in zip(
+        ensemble.estimators_,
+        ensemble.member_random_states_,
+        ensemble.member_validation_fractions_,
+        strict=True,
+    ):
+        alone = _net(random_state=seed, validation_fraction=share).fit(X, y)
+        np.testing.assert_array_equal(member.coefs_, alone.coefs_)
+    # Reproducible, and the seeds are the ensemble's draws.
+    again = clone(ensemble).fit(X, y)
+    assert again.member_random_states_ == ensemble.member_random_states_
+    np.testing.assert_array_equal(again.simulate(X), ensemble.simulate(X))
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+def test_given_validation_records_are_every_members():
+    (X, y), (Xv, yv) = _record(0), _record(1)
+    ensemble = EnsembleRegressor(_net(), n_members=2, random_state=0)
+    ensemble.fit(X, y, X_val=Xv, y_val=yv)
+    assert ensemble.member_validation_fractions_ == [None, None]
+    seed = ensemble.member_random_states_[1]
+    alone = _net(random_state=seed).fit(X, y, X_val=Xv, y_val=yv)
+    np.testing.assert_array_equal(ensemble.estimators_[1].coefs_, alone.coefs_)
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+def test_runs_are_the_pointwise_median_of_the_finite_members(monkeypatch):
+    X, y = _record(0)
+    Xs, ys = [X[:150], X[150:]], [y[:150], y[150:]]
+    ensemble = EnsembleRegressor(_net(), n_members=3, random_state=0).fit(Xs, ys)
+    runs = np.array([m.simulate(X) for m in ensemble.estimators_])
+    assert not np.allclose(np.median(runs, axis=0), runs.mean(axis=0))
+    np.testing.assert_array_equal(ensemble.simulate(X), np.median(runs, axis=0))
+    one_step = np.array([m.predict(X, y) for m in ensemble.estimators_])
+    np.testing.assert_array_equal(ensemble.predict(X, y), np.median(one_step, axis=0))
+    # Lists in, lists out, sequence by sequence.
+    parts = ensemble.simulate(Xs)
+    assert isinstance(parts, list) and len(parts) == 2
+    for part, Xk in zip(parts, Xs, strict=True):
+        runs_k = [m.simulate(Xk) for m in ensemble.estimators_]
+        np.testing.assert_array_equal(part, np.median(runs_k, axis=0))
+    assert ensemble.score(X, y) == free_run_r2(ensemble.simulate(X), y)
+    # A member whose run diverges is left out where it is not finite.
+    astray = ensemble.estimators_[0]
+    wild = np.where(np.arange(len(X)) < 100, runs[0], np.inf)
+    wild[50] = np.nan
+    monkeypatch.setattr(astray, "simulate", lambda X, **kwargs: wild)
+    combined = ensemble.simulate(X)
+    np.testing.assert_array_equal(combined[:50], np.median(runs, axis=0)[:50])
+    np.testing.assert_array_equal(combined[100:], runs[1:, 100:].mean(axis=0))
+    assert combined[50] == runs[1:, 50].mean()
+
+
+def test_errors_name_the_argument():
+    X, y = _record(0)
+    with pytest.raises(ValueError, match="validation_fractions must hold"):
+        EnsembleRegressor(_net(), validation_fractions=(0.2, 1.0)).fit(X, y)
+    with pytest.raises(ValueError, match="validation_fractions must hold"):
+        EnsembleRegressor(_net(), validation_fractions=()).fit(X, y)
+    with pytest.raises(ValueError, match="n_members"):
+        EnsembleRegressor(_net(), n_members=0).fit(X, y)
+    fitted = EnsembleRegressor(_net(), n_members=1, random_state=0).fit(X, y)
+    with pytest.raises(ValueError, match="return_std is not available"):
+        fitted.simulate(X, return_std=True)
+
+
+def test_default_members_are_issm_networks():
+    X, y = _record(0, n=200)
+    ensemble = EnsembleRegressor(n_members=1, random_state=0)
+    ensemble.set_params(estimator=None)
+    fitted = ensemble.fit(X, y)
+    assert isinstance(fitted.estimators_[0], ISSMRegressor)
+    assert fitted.n_features_in_ == 1
