@@ -2,23 +2,26 @@
 
 A single default fit to one record depends on its seed and on which share
 of the record is held out to validate it. This benchmark fits, on the
-field benchmarks' training record (the tail held out, the estimators'
-default protocol):
+systems of :mod:`bench_constants` (the field benchmarks with their tail
+held out, the estimators' default protocol; the lightly damped chain; the
+oscillator's protocol P1, whose validation records are given as ``X_val``):
 
 * single default networks with ``validation_fraction`` 0.15, 0.2, 0.25
-  and 0.3, once per ``random_state``;
-* ``EnsembleRegressor`` of the same network (eight members, the same four
+  and 0.3 (the default only where ``X_val`` is given), once per
+  ``random_state``;
+* ``EnsembleRegressor`` of the same network (eight members, the four
   shares in turn), once per ``random_state``;
 
-and reports, per benchmark and network, the median test RMSE (free run
-from rest after the initialisation window, as :mod:`bench_field`), its
-range, the spread (largest over smallest) and the median CPU time of a
-fit. Run::
+and reports, per case and network, the median test error, its range and
+spread (largest over smallest) over the single fits of every share and
+seed (the draws a user of one fit gets) and over the ensembles, the single
+fits' median per share, and the median CPU time of a fit. Run::
 
     python benchmarks/bench_ensemble.py [--only cascaded_tanks,emps]
-        [--seeds 0,1,2,3,4] [--data-home DIR]
+        [--seeds 0,1,2,3,4] [--data-home DIR] [--out FILE]
 
-(about 40 CPU-minutes for both benchmarks; ``results_ensemble.md``).
+(the defaults: about 40 CPU-minutes; ``results_ensemble.md`` also holds
+``--only chains,oscillator --seeds 0,1,2``).
 """
 
 from __future__ import annotations
@@ -28,13 +31,14 @@ import os
 import platform
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_field import BENCHMARKS, run_one
+from bench_constants import cases
 
 from sysid_nn import EnsembleRegressor, ISSMRegressor, TDLRegressor
 
@@ -42,29 +46,24 @@ HERE = Path(__file__).resolve().parent
 OUT = HERE / "results_ensemble.md"
 NETWORKS = {"TDLRegressor()": TDLRegressor, "ISSMRegressor()": ISSMRegressor}
 FRACTIONS = (0.15, 0.2, 0.25, 0.3)
+#: Systems whose cases pass validation records (the shares do not act).
+WITH_X_VAL = {"oscillator"}
 
 
-def candidates(network):
-    """``(label, factory)`` of the single fits at each held-out share and
-    of the ensemble."""
-    for share in FRACTIONS:
-        yield (
-            f"single, validation_fraction={share}",
-            lambda seed, share=share: network(
-                random_state=seed, validation_fraction=share
-            ),
-        )
-    yield (
-        "EnsembleRegressor, 8 members",
-        lambda seed: EnsembleRegressor(network(), random_state=seed),
-    )
-
-
-def _summary(values) -> str:
+def _range(values) -> str:
     v = np.asarray(values, dtype=float)
     if not np.all(np.isfinite(v)):
-        return f"{np.median(v):.4g} (diverged) | - "
-    return f"{np.median(v):.4g} ({v.min():.4g}-{v.max():.4g}) | {v.max() / v.min():.2f}"
+        return f"{np.median(v):.4g}, not finite in {np.sum(~np.isfinite(v))}"
+    return f"{np.median(v):.4g} ({v.min():.4g}-{v.max():.4g}), {v.max() / v.min():.2f}"
+
+
+def _fit(fit, score, model) -> tuple[float, float]:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cpu = time.process_time()
+        fitted = fit(model)
+        cpu = time.process_time() - cpu
+        return float(score(fitted)), cpu
 
 
 def main(argv=None) -> None:
@@ -75,54 +74,57 @@ def main(argv=None) -> None:
     parser.add_argument("--out", default=str(OUT), help="report file (markdown)")
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
-    started = time.time()
+    started, loads = time.time(), [os.getloadavg()[0]]
     lines = [
-        "# Single fits and ensembles of fits",
+        f"Command: `python benchmarks/bench_ensemble.py --only {args.only} "
+        f"--seeds {args.seeds}`; {platform.machine()}, {os.cpu_count()} cores "
+        "shared with other jobs.",
         "",
-        "Command: `python benchmarks/bench_ensemble.py "
-        f"--only {args.only} --seeds {args.seeds}`; "
-        f"{platform.machine()}, {os.cpu_count()} cores shared with other jobs, "
-        f"1-minute load at the start {os.getloadavg()[0]:.1f}.",
-        "",
-        f"Test RMSE of the free run from rest, over `random_state` {seeds}, the "
-        "training record's tail held out (no `X_val`). `single, all shares`: "
-        "the single fits of the four shares together, the draws a user of one "
-        "fit gets. Spread: largest over smallest. CPU-s: median of a fit, one "
-        "core.",
-        "",
-        "| benchmark | network | fits | median (range) | spread | CPU-s |",
-        "|---|---|---|---|---|---|",
+        "| system | case | network | single: median (range), spread | "
+        "ensemble: median (range), spread | single, median per share "
+        f"{' / '.join(map(str, FRACTIONS))} | CPU-s single / ensemble |",
+        "|---|---|---|---|---|---|---|",
     ]
-    for benchmark in [b for b in args.only.split(",") if b]:
-        data = BENCHMARKS[benchmark][0](data_home=args.data_home)
-        for name, network in NETWORKS.items():
-            pooled, pooled_cpu = [], []
-            for label, factory in candidates(network):
-                errors, cpu = [], []
+    for system in [s for s in args.only.split(",") if s]:
+        shares = (None,) if system in WITH_X_VAL else FRACTIONS
+        for label, fit, score in cases(system, args.data_home):
+            if label.startswith("split"):
+                continue  # the field records' default protocol only
+            for name, network in NETWORKS.items():
+                single, per_share, ensemble, cpu_single, cpu_ensemble = (
+                    [],
+                    {},
+                    [],
+                    [],
+                    [],
+                )
                 for seed in seeds:
-                    (row,) = run_one(
-                        benchmark, label, data, "tail", random_state=seed,
-                        factory=factory,
-                    )  # fmt: skip
-                    errors.append(row["rmse"])
-                    cpu.append(row["cpu_s"])
-                if label.startswith("single"):
-                    pooled += errors
-                    pooled_cpu += cpu
-                else:
-                    lines.append(
-                        f"| {benchmark} | {name} | single, all shares | "
-                        f"{_summary(pooled)} | {np.median(pooled_cpu):.1f} |"
+                    for share in shares:
+                        extra = {} if share is None else {"validation_fraction": share}
+                        test, cpu = _fit(
+                            fit, score, network(random_state=seed, **extra)
+                        )
+                        single.append(test)
+                        per_share.setdefault(share, []).append(test)
+                        cpu_single.append(cpu)
+                    test, cpu = _fit(
+                        fit, score, EnsembleRegressor(network(), random_state=seed)
                     )
+                    ensemble.append(test)
+                    cpu_ensemble.append(cpu)
+                    loads.append(os.getloadavg()[0])
+                    print(system, label, name, seed, single[-len(shares) :],
+                          test, flush=True)  # fmt: skip
+                medians = " / ".join(f"{np.median(v):.4g}" for v in per_share.values())
                 lines.append(
-                    f"| {benchmark} | {name} | {label} | {_summary(errors)} "
-                    f"| {np.median(cpu):.1f} |"
+                    f"| {system} | {label} | {name} | {_range(single)} | "
+                    f"{_range(ensemble)} | {medians} | "
+                    f"{np.median(cpu_single):.1f} / {np.median(cpu_ensemble):.1f} |"
                 )
     lines += [
         "",
-        f"Wall time {(time.time() - started) / 60:.0f} min; 1-minute load at the "
-        f"end {os.getloadavg()[0]:.1f}. Errors in the benchmark's unit "
-        "(V for Cascaded Tanks, m for EMPS).",
+        f"Wall time {(time.time() - started) / 60:.0f} min; 1-minute load "
+        f"{min(loads):.1f}-{max(loads):.1f}.",
         "",
     ]
     Path(args.out).write_text("\n".join(lines))
