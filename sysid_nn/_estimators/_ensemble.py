@@ -26,10 +26,9 @@ __all__ = ["EnsembleRegressor"]
 
 
 class EnsembleRegressor(RegressorMixin, BaseEstimator):
-    """Fits of one network on different seeds and held-out shares, combined
-    by the pointwise median of their runs.
+    """Fits of one network on several seeds and held-out shares, combined.
 
-    Each member is a clone of ``estimator`` with its own ``random_state``
+    The members' runs are combined by their pointwise median. Each member is a clone of ``estimator`` with its own ``random_state``
     and, where the validation records are held out of the training records
     (no ``X_val``), its own ``validation_fraction``. :meth:`simulate` and
     :meth:`predict` return the median over the members at every sample, so
