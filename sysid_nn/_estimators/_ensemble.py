@@ -2,11 +2,12 @@
 
 A single fit to a short record depends on draws a user does not see: the
 seed of its restarts and which samples validate it (on Cascaded Tanks the
-default ISSM tested at 0.55 V holding out a fifth of the record and at
-0.68-0.76 V holding out 15 or 25 %). :class:`EnsembleRegressor` fits the
-network several times, each member on its own seed and held-out share, and
-returns the pointwise median of the members' runs, which moves much less
-with those draws than any one member (``benchmarks/results_ensemble.md``).
+default ISSM's median test error is 0.54 V holding out a fifth of the
+record, 0.77 / 0.68 V holding out 15 / 25 %). :class:`EnsembleRegressor`
+fits the network several times, each member on its own seed and held-out
+share, and returns the pointwise median of the members' runs, which moves
+much less with those draws than any one member
+(``benchmarks/results_ensemble.md``).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ __all__ = ["EnsembleRegressor"]
 class EnsembleRegressor(RegressorMixin, BaseEstimator):
     """Fits of one network on several seeds and held-out shares, combined.
 
-    The members' runs are combined by their pointwise median. Each member is a clone of ``estimator`` with its own ``random_state``
+    Each member is a clone of ``estimator`` with its own ``random_state``
     and, where the validation records are held out of the training records
     (no ``X_val``), its own ``validation_fraction``. :meth:`simulate` and
     :meth:`predict` return the median over the members at every sample, so
@@ -71,10 +72,10 @@ class EnsembleRegressor(RegressorMixin, BaseEstimator):
     The median of the members' runs is not itself a network: the structural
     readouts (:func:`~sysid_nn.modal_parameters`, :func:`~sysid_nn.backbone`),
     the bands (``return_std``), saving and export apply to the members
-    (``estimators_``). Over ``random_state`` 0-9 and four validation
-    splits of the Cascaded Tanks benchmark, single ISSM fits tested at
-    0.46-1.06 V and ensembles of eight at 0.52-0.60 V
-    (``benchmarks/results_ensemble.md``).
+    (``estimators_``). Over ``random_state`` 0-4, single default ISSM fits
+    holding out 15-30 % of the record tested at 0.53-1.13 V on the Cascaded
+    Tanks benchmark and 1.9-10.1 mm on EMPS, ensembles of eight at
+    0.54-0.57 V and 2.2-2.8 mm (``benchmarks/results_ensemble.md``).
 
     Examples
     --------
