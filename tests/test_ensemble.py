@@ -5,19 +5,10 @@ import numpy as np
 import pytest
 from sklearn.base import clone
 from sklearn.utils.estimator_checks import parametrize_with_checks
+from test_tdl import ROW_ORDER_CHECKS
 
 from sysid_nn import EnsembleRegressor, ISSMRegressor, TDLRegressor
 from sysid_nn._estimators._base import free_run_r2
-
-ROW_ORDER_CHECKS = {
-    "check_methods_subset_invariance": (
-        "rows are consecutive time steps of one experiment: a subset of rows is "
-        "a different experiment with different initial conditions"
-    ),
-    "check_methods_sample_order_invariance": (
-        "rows are consecutive time steps: reordering them changes the dynamics"
-    ),
-}
 
 
 def _record(seed, n=300):

@@ -103,8 +103,22 @@ def after_run_in(diverged: np.ndarray, leads: np.ndarray) -> np.ndarray:
     return np.where(diverged >= 0, np.maximum(diverged - leads, 0), -1)
 
 
+class _RecordsRegressorTags:
+    """The scikit-learn tags of a regressor of measured records (not public):
+    a target is required and may have several outputs."""
+
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.target_tags.required = True
+        tags.target_tags.multi_output = True
+        # Rows are time steps of one experiment, not independent samples: a
+        # free-run score on shuffled tabular data means nothing.
+        tags.regressor_tags.poor_score = True
+        return tags
+
+
 class _RecurrentRegressorBase(
-    RegressorMixin, _SequenceIO, BaseEstimator, metaclass=ABCMeta
+    _RecordsRegressorTags, RegressorMixin, _SequenceIO, BaseEstimator, metaclass=ABCMeta
 ):
     """Base class of the recurrent-network regressors (not public).
 
@@ -143,16 +157,6 @@ class _RecurrentRegressorBase(
         """
         for name in self._get_param_names():
             setattr(self, name, arguments[name])
-
-    # ------------------------------------------------------------------ tags
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.target_tags.required = True
-        tags.target_tags.multi_output = True
-        # Rows are time steps of one experiment, not independent samples: a
-        # free-run score on shuffled tabular data means nothing.
-        tags.regressor_tags.poor_score = True
-        return tags
 
     # ------------------------------------------------------- structure hooks
     @abstractmethod
@@ -864,26 +868,15 @@ default=None
         )
         return y_pred, std
 
+    @document_estimator
     def score(self, X, y, sample_weight=None):
         """Coefficient of determination R^2 of the free-run simulation.
 
         The model is simulated from the excitation alone (from rest, as
         :meth:`simulate` does) and compared with the measured response over
-        all samples of all sequences. A diverged simulation scores ``-inf``.
+        all samples of all sequences.
 
-        Parameters
-        ----------
-        X : array-like of shape (n_samples, n_inputs) or list of such
-            Excitation.
-        y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list
-            Measured response.
-        sample_weight : array-like of shape (n_samples,), default=None
-            Sample weights (one array only).
-
-        Returns
-        -------
-        score : float
-            R^2 averaged uniformly over outputs.
+        %(score)s
         """
         return free_run_r2(self.predict(X), y, sample_weight)
 

@@ -21,12 +21,13 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_is_fitted
 
-from sysid_nn._estimators._base import free_run_r2
+from sysid_nn._estimators._base import _RecordsRegressorTags, free_run_r2
+from sysid_nn._estimators._estimator_docs import document_estimator
 
 __all__ = ["EnsembleRegressor"]
 
 
-class EnsembleRegressor(RegressorMixin, BaseEstimator):
+class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
     """Fits of one network on several seeds and held-out shares, combined.
 
     Each member is a clone of ``estimator`` with its own ``random_state``
@@ -111,14 +112,6 @@ class EnsembleRegressor(RegressorMixin, BaseEstimator):
         self.n_members = n_members
         self.validation_fractions = validation_fractions
         self.random_state = random_state
-
-    def __sklearn_tags__(self):
-        tags = super().__sklearn_tags__()
-        tags.target_tags.required = True
-        tags.target_tags.multi_output = True
-        # As the members': rows are time steps of one experiment.
-        tags.regressor_tags.poor_score = True
-        return tags
 
     def fit(self, X, y, *, X_val=None, y_val=None):
         """Fit the members.
@@ -214,23 +207,15 @@ class EnsembleRegressor(RegressorMixin, BaseEstimator):
         check_is_fitted(self, "estimators_")
         return _median([m.predict(X, y, horizon=horizon) for m in self.estimators_])
 
+    @document_estimator
     def score(self, X, y, sample_weight=None):
         """Coefficient of determination R^2 of the free-run simulation.
 
-        Parameters
-        ----------
-        X : array-like of shape (n_samples, n_inputs) or list of such
-            Excitation.
-        y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list
-            Measured response.
-        sample_weight : array-like of shape (n_samples,), default=None
-            Sample weights (one array only).
+        The median of the members' free runs from rest (:meth:`simulate`),
+        compared with the measured response over all samples of all
+        sequences.
 
-        Returns
-        -------
-        score : float
-            R^2 averaged uniformly over outputs; ``-inf`` where the run is
-            not finite.
+        %(score)s
         """
         return free_run_r2(self.predict(X), y, sample_weight)
 

@@ -53,6 +53,22 @@ n_jobs : int, default=None
 _EXCITATION_DOC = """\
 X : array-like of shape (n_samples, n_inputs) or list of such
     Excitation."""
+#: The Parameters and Returns of ``score`` (the free run's R^2).
+_SCORE_DOC = """\
+Parameters
+----------
+X : array-like of shape (n_samples, n_inputs) or list of such
+    Excitation.
+y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list
+    Measured response.
+sample_weight : array-like of shape (n_samples,), default=None
+    Sample weights (one array only).
+
+Returns
+-------
+score : float
+    R^2 averaged uniformly over outputs; ``-inf`` where the free run is
+    not finite."""
 _SIMULATION_STD_DOC = """\
 return_std : bool, default=False
     Also return the standard deviation of every sample (delta
@@ -264,10 +280,11 @@ feature_names_in_ : ndarray
 #: ``%(selection_attributes)s`` and ``%(variance_attributes)s`` in the class
 #: docstring, ``%(excitation)s`` and ``%(simulation_std)s`` (the
 #: ``return_std``/``interval`` entries and the Returns of ``simulate``) in
-#: the methods'.
+#: the methods', ``%(score)s`` in ``score``'s.
 document_estimator = fill_doc(
     training_parameters=_TRAINING_PARAMETERS_DOC,
     excitation=_EXCITATION_DOC,
+    score=_SCORE_DOC,
     simulation_std=_SIMULATION_STD_DOC,
     selection_attributes=_SELECTION_ATTRIBUTES_DOC,
     variance_attributes=_VARIANCE_ATTRIBUTES_DOC,
