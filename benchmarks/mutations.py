@@ -90,8 +90,8 @@ MUTATIONS = (
     Mutation(
         "worst restart",
         "sysid_nn/_engine/_selection.py",
-        'return min(pool, key=lambda r: r.criterion), "restart"',
-        'return max(pool, key=lambda r: r.criterion), "restart"',
+        "best = min(pool, key=lambda r: r.criterion)\n",
+        "best = max(pool, key=lambda r: r.criterion)\n",
         (f"{POLICY}::test_without_a_linear_candidate_the_best_restart_is_kept",),
     ),
     Mutation(
