@@ -128,6 +128,17 @@ def cases(system: str, data_home=None, record=None):
         yield Path(record).name, lambda m: m.fit(u[:n], y[:n]), score
 
 
+def fit_scored(fit, score, model) -> tuple:
+    """``(fitted model, test error, CPU seconds of the fit)`` of one case's
+    ``fit`` and ``score`` (see :func:`cases`), its warnings silenced."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cpu = time.process_time()
+        fitted = fit(model)
+        cpu = time.process_time() - cpu
+        return fitted, score(fitted), cpu
+
+
 def _set(module, name: str, value: str) -> None:
     old = getattr(module, name)
     setattr(module, name, type(old)(float(value)))
@@ -147,12 +158,9 @@ def run(constant: str, values, systems, seeds, data_home=None, record=None):
                     for seed in seeds:
                         for value in values:
                             _set(module, name, value)
-                            with warnings.catch_warnings():
-                                warnings.simplefilter("ignore")
-                                cpu = time.process_time()
-                                model = fit(cls(random_state=seed))
-                                cpu = time.process_time() - cpu
-                                test = score(model)
+                            model, test, cpu = fit_scored(
+                                fit, score, cls(random_state=seed)
+                            )
                             refined = model.best_restart_ is not None and (
                                 model.best_restart_ == model.refined_restart_
                             )

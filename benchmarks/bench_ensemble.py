@@ -31,14 +31,14 @@ import os
 import platform
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from bench_constants import cases
+import _protocol as P
+from bench_constants import cases, fit_scored
 
 from sysid_nn import EnsembleRegressor, ISSMRegressor, TDLRegressor
 
@@ -51,19 +51,11 @@ WITH_X_VAL = {"oscillator"}
 
 
 def _range(values) -> str:
+    """``"median (min - max), spread"`` of test errors."""
     v = np.asarray(values, dtype=float)
     if not np.all(np.isfinite(v)):
         return f"{np.median(v):.4g}, not finite in {np.sum(~np.isfinite(v))}"
-    return f"{np.median(v):.4g} ({v.min():.4g}-{v.max():.4g}), {v.max() / v.min():.2f}"
-
-
-def _fit(fit, score, model) -> tuple[float, float]:
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        cpu = time.process_time()
-        fitted = fit(model)
-        cpu = time.process_time() - cpu
-        return float(score(fitted)), cpu
+    return f"{P.median_range(v, 4)}, {v.max() / v.min():.2f}"
 
 
 def main(argv=None) -> None:
@@ -101,13 +93,13 @@ def main(argv=None) -> None:
                 for seed in seeds:
                     for share in shares:
                         extra = {} if share is None else {"validation_fraction": share}
-                        test, cpu = _fit(
+                        _, test, cpu = fit_scored(
                             fit, score, network(random_state=seed, **extra)
                         )
                         single.append(test)
                         per_share.setdefault(share, []).append(test)
                         cpu_single.append(cpu)
-                    test, cpu = _fit(
+                    _, test, cpu = fit_scored(
                         fit, score, EnsembleRegressor(network(), random_state=seed)
                     )
                     ensemble.append(test)

@@ -51,7 +51,7 @@ from _results import store_rows
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.model_selection import GridSearchCV, KFold
 
-from sysid_nn import EnsembleRegressor, ISSMRegressor, TDLRegressor, datasets
+from sysid_nn import ISSMRegressor, TDLRegressor, datasets
 from sysid_nn.metrics import make_simulation_scorer
 
 HERE = Path(__file__).resolve().parent
@@ -89,14 +89,6 @@ MODELS = {
     "issm_linear": (
         "ISSMRegressor(hidden_layer_sizes=())",
         lambda seed=SEED: ISSMRegressor(hidden_layer_sizes=(), random_state=seed),
-    ),
-    "tdl_ensemble": (
-        "EnsembleRegressor(TDLRegressor())",
-        lambda seed=SEED: EnsembleRegressor(TDLRegressor(), random_state=seed),
-    ),
-    "issm_ensemble": (
-        "EnsembleRegressor(ISSMRegressor())",
-        lambda seed=SEED: EnsembleRegressor(ISSMRegressor(), random_state=seed),
     ),
 }
 #: The models a run fits unless told (the published tables' columns).
@@ -170,15 +162,10 @@ def run_one(
     *,
     random_state: int = SEED,
     shift: int = 0,
-    factory=None,
 ) -> list[dict]:
-    """Fit one model on one benchmark and score it on every test record.
-
-    ``factory(seed)`` builds a model that is not one of :data:`MODELS`
-    (``model_name`` is then its label).
-    """
+    """Fit one model on one benchmark and score it on every test record."""
     _, unit, scale = BENCHMARKS[benchmark]
-    label, factory = MODELS[model_name] if factory is None else (model_name, factory)
+    label, factory = MODELS[model_name]
     model = factory(random_state)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ConvergenceWarning)

@@ -178,12 +178,11 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
             runs are not finite is the median of the others.
         """
         check_is_fitted(self, "estimators_")
-        if kwargs.get("return_std"):
+        if kwargs.pop("return_std", False):
             raise ValueError(
                 "return_std is not available for an ensemble: the bands are "
                 "the members' (estimators_[k].simulate(X, return_std=True))."
             )
-        kwargs.pop("return_std", None)
         return _median([m.simulate(X, **kwargs) for m in self.estimators_])
 
     def predict(self, X, y=None, *, horizon=1):

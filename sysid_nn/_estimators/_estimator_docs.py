@@ -54,11 +54,10 @@ _EXCITATION_DOC = """\
 X : array-like of shape (n_samples, n_inputs) or list of such
     Excitation."""
 #: The Parameters and Returns of ``score`` (the free run's R^2).
-_SCORE_DOC = """\
+_SCORE_DOC = f"""\
 Parameters
 ----------
-X : array-like of shape (n_samples, n_inputs) or list of such
-    Excitation.
+{_EXCITATION_DOC}
 y : array-like of shape (n_samples,) or (n_samples, n_outputs), or list
     Measured response.
 sample_weight : array-like of shape (n_samples,), default=None
