@@ -139,18 +139,11 @@ def _issm_matrices(est) -> tuple:
 
 def _step_map(est) -> _StepMap:
     """The step map of ``est`` and the state its free run starts from."""
-    from sklearn.utils.validation import check_is_fitted
-
     from sysid_nn._engine._layout import MLPLayout
-    from sysid_nn._estimators._issm import ISSMRegressor
     from sysid_nn._estimators._tdl import TDLRegressor
+    from sysid_nn._saved import check_network
 
-    if not isinstance(est, (TDLRegressor, ISSMRegressor)):
-        raise TypeError(
-            "estimator must be a TDLRegressor or an ISSMRegressor, got "
-            f"{type(est).__name__}."
-        )
-    check_is_fitted(est, "coefs_")
+    check_network(est)
     build = _tdl_matrices if isinstance(est, TDLRegressor) else _issm_matrices
     Mzs, Mzu, Mss, Msu, Mso, Co, start = build(est)
     layout = MLPLayout(est._sizes_, est._bypass())

@@ -56,6 +56,19 @@ def _estimators() -> dict[str, type]:
     return {"TDLRegressor": TDLRegressor, "ISSMRegressor": ISSMRegressor}
 
 
+def check_network(estimator: Any) -> None:
+    """Raise unless ``estimator`` is a fitted ``TDLRegressor`` or
+    ``ISSMRegressor`` (what a model file and an ONNX graph can hold)."""
+    from sklearn.utils.validation import check_is_fitted
+
+    if type(estimator) not in _estimators().values():
+        raise TypeError(
+            "estimator must be a TDLRegressor or an ISSMRegressor, got "
+            f"{type(estimator).__name__}."
+        )
+    check_is_fitted(estimator, "coefs_")
+
+
 def _dataclasses() -> dict[str, type]:
     """The dataclasses fitted attributes hold, by the name the file stores."""
     from sysid_nn._engine._diagnosis import RecordDiagnosis
@@ -123,16 +136,9 @@ class _Encoder:
 
 def _write(path: str | os.PathLike, estimator: Any, info: dict) -> None:
     """Write ``estimator`` and ``info`` (see ``_INFO_KEYS``) to ``path``."""
-    from sklearn.utils.validation import check_is_fitted
-
     from sysid_nn import __version__
 
-    if type(estimator) not in _estimators().values():
-        raise TypeError(
-            "estimator must be a TDLRegressor or an ISSMRegressor, got "
-            f"{type(estimator).__name__}."
-        )
-    check_is_fitted(estimator, "coefs_")
+    check_network(estimator)
     encode = _Encoder()
     header = {
         "format": _FORMAT,
