@@ -134,18 +134,28 @@ MUTATIONS = (
     Mutation(
         "short-record order always",
         "sysid_nn/_engine/_order.py",
-        "kept = scores[1] <= (1.0 + SHORT_RECORD_TOLERANCE) * scores[0] + ORDER_FLOOR",
-        "kept = True",
+        "passing = [n for n in range(limit, n_states) if best[n] <= bound]",
+        "passing = list(range(limit, n_states))",
+        (
+            "tests/test_order.py::test_short_record_order_that_misses_the_dynamics_"
+            "gives_way_to_one_that_holds_them",
+        ),
+    ),
+    Mutation(
+        "short-record candidates the limit alone",
+        "sysid_nn/_engine/_order.py",
+        "passing = [n for n in range(limit, n_states) if best[n] <= bound]",
+        "passing = [n for n in (limit,) if best[n] <= bound]",
         (
             "tests/test_order.py::"
-            "test_short_record_order_that_misses_the_dynamics_loses_to_the_evidence",
+            "test_evidence_order_stays_where_no_lower_order_validates_as_well",
         ),
     ),
     Mutation(
         "short-record order never",
         "sysid_nn/_engine/_order.py",
-        "kept = scores[1] <= (1.0 + SHORT_RECORD_TOLERANCE) * scores[0] + ORDER_FLOOR",
-        "kept = False",
+        "passing = [n for n in range(limit, n_states) if best[n] <= bound]",
+        "passing = []",
         ("tests/test_order.py::test_short_records_lower_the_order",),
     ),
     Mutation(

@@ -23,6 +23,7 @@ from sysid_nn._engine._order import (
     SAMPLES_PER_WEIGHT,
     SHORT_RECORD_TOLERANCE,
     _n_weights,
+    short_record_cap,
 )
 from sysid_nn.plotting import plot_order_selection
 
@@ -143,28 +144,56 @@ def _sixth_order(n, seed, noise=0.01):
     return u[:, None], y + noise * y.std() * rng.standard_normal(n)
 
 
-def test_short_record_order_that_misses_the_dynamics_loses_to_the_evidence():
-    # 1500 samples allow the auto-sized network 4 states, the system has 6:
-    # the linear model of 4 states validates far worse, so the evidence's
-    # order is kept, without a warning.
+def test_short_record_order_that_misses_the_dynamics_gives_way_to_one_that_holds_them():
+    # 1500 samples allow the auto-sized network 4 states, the system has 6
+    # (three resonances): the linear models up to 4 states validate far
+    # worse, those up to 6 as well as the evidence's 12, so 6 are kept,
+    # with a warning naming both orders.
     X, y = _sixth_order(1500, 0)
     Xv, yv = _sixth_order(1000, 1)
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", UserWarning)
-        warnings.filterwarnings("ignore", "The training outputs", UserWarning)
-        warnings.filterwarnings("ignore", "A linear one-step model", UserWarning)
+    with pytest.warns(UserWarning, match="from 12 to 6 states"):
         model = _linear_issm().fit(X, y, X_val=Xv, y_val=yv)
     sel = model.order_selection_
-    assert sel.linear_order == 6
-    assert sel.short_record_states is not None
-    assert sel.short_record_states < 6 < sel.evidence_states == model.n_states_
-    evidence, lowered = sel.short_record_scores
-    assert lowered > (1 + SHORT_RECORD_TOLERANCE) * evidence + ORDER_FLOOR
-    assert "the evidence's order is kept" in sel.reason
+    assert not sel.short_record_fitted_start
+    assert sel.linear_order == 6 and sel.evidence_states == 12
+    assert sel.short_record_limit == 4
+    assert model.n_states_ == sel.short_record_states == 6
+    evidence, kept = sel.short_record_scores
+    assert kept <= (1 + SHORT_RECORD_TOLERANCE) * evidence + ORDER_FLOOR
+    # Every smaller candidate misses a mode.
+    for n in range(sel.short_record_limit, 6):
+        best = np.min(sel.scores[sel.orders <= n])
+        assert best > (1 + SHORT_RECORD_TOLERANCE) * evidence + ORDER_FLOOR
+    assert "(the fewest from 4 up)" in sel.reason
     fig = plot_order_selection(model)
     labels = fig.axes[1].get_legend_handles_labels()[1]
-    assert f"short-record order {sel.short_record_states} (evidence's" in labels[-1]
+    assert labels[-1] == "short-record order 6 (kept)"
     plt.close(fig)
+
+
+def test_evidence_order_stays_where_no_lower_order_validates_as_well():
+    # The rule itself: candidates 5, 6 and 7 below the evidence's 8 (the
+    # limit at 5), each order's linear model better than the last.
+    class Network:
+        n_outputs_ = 1
+
+    orders = np.arange(1, 9)
+    scores = np.array([1.0, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.1])
+    sel = short_record_cap(
+        Network(), orders, scores, 8, lambda n: 100 * n, n_samples=5000
+    )
+    assert sel.n_states == sel.evidence_states == 8
+    assert sel.short_record_limit == sel.short_record_states == 5
+    np.testing.assert_array_equal(sel.short_record_scores, [0.1, 0.6])
+    assert "the evidence's order is kept" in sel.reason
+    # With the order 7 within the tolerance it is kept, the fewest passing.
+    scores[6] = 0.12
+    scores[5] = 0.125
+    sel = short_record_cap(
+        Network(), orders, scores, 8, lambda n: 100 * n, n_samples=5000
+    )
+    assert sel.n_states == sel.short_record_states == 6
+    np.testing.assert_array_equal(sel.short_record_scores, [0.1, 0.125])
 
 
 def test_short_record_order_kept_where_the_evidence_gains_little():
@@ -199,18 +228,18 @@ def _modes_in_motion(chain, n, lead=500, seed=0):
 def test_short_record_orders_compared_from_fitted_starts_where_needed(modal_chain):
     # The modes outlast the 400-sample validation tail, which starts in
     # motion: from rest every order's linear model mostly shows its wrong
-    # start (the lowered order within 30 % of the evidence's); from states
-    # fitted to the first samples the lowered order misses modes.
+    # start (the limit's within 30 % of the evidence's); from states fitted
+    # to the first samples every order below the three modes' 6 misses
+    # modes, and 6 are kept.
     X, y = _modes_in_motion(modal_chain, 2000)
     model = ISSMRegressor(n_init=1, max_iter=1, random_state=0).fit(X, y)
     sel = model.order_selection_
     assert sel.short_record_fitted_start
-    assert model.n_states_ == sel.evidence_states > sel.short_record_states
-    evidence, lowered = sel.short_record_scores
-    assert lowered > 2 * (1 + SHORT_RECORD_TOLERANCE) * evidence
+    assert sel.short_record_limit < 6 < sel.evidence_states
+    assert model.n_states_ == sel.short_record_states == 6
     from_rest = [
         np.min(sel.scores[sel.orders <= n])
-        for n in (sel.evidence_states, sel.short_record_states)
+        for n in (sel.evidence_states, sel.short_record_limit)
     ]
     assert from_rest[1] <= (1 + SHORT_RECORD_TOLERANCE) * from_rest[0]
 

@@ -25,11 +25,12 @@ it. The rule, whose inputs are all kept in ``order_selection_``:
   error of 8.0 mV, 6 states 0.49 mV);
 * records too short for the projection get ``p + 2`` states (empty
   evidence);
-* on short records the order lowered until the auto-sized network has
-  at most one weight per :data:`SAMPLES_PER_WEIGHT` training samples (down
-  to ``p + 2``) is a candidate beside the evidence's, kept, with a warning,
-  where its linear models validate within :data:`SHORT_RECORD_TOLERANCE`
-  of the evidence's (:func:`short_record_cap`);
+* on short records every order from the one at which the auto-sized
+  network has at most one weight per :data:`SAMPLES_PER_WEIGHT` training
+  samples (down to ``p + 2``) up to the evidence's is a candidate: the
+  smallest whose linear models validate within
+  :data:`SHORT_RECORD_TOLERANCE` of the evidence's is kept, with a warning
+  (:func:`short_record_cap`);
 * where no linear model explains the records (best NRMSE above
   :data:`RELIABLE_NRMSE`, or none stable: the hysteretic oscillator's drift,
   an integrator), the order is the singular values' largest gap
@@ -105,7 +106,7 @@ def select_order(est, train, val, n_weights) -> Bunch:
     ``n_states`` (the rule above), the rule's constants ``tolerance``,
     ``floor`` and ``reliable``, and the short-record rule's evidence
     (:func:`short_record_cap`): ``evidence_states``,
-    ``short_record_states``, ``short_record_scores``,
+    ``short_record_states``, ``short_record_limit``, ``short_record_scores``,
     ``short_record_fitted_start`` (whether those scores are of runs from
     fitted states, :func:`_fitted_start_judges`) and ``reason``.
     """
@@ -123,7 +124,8 @@ def select_order(est, train, val, n_weights) -> Bunch:
             gap_order=None, validated_order=None, linear_order=None,
             n_outputs=p, n_states=p + 2,
             tolerance=ORDER_TOLERANCE, floor=ORDER_FLOOR, reliable=RELIABLE_NRMSE,
-            evidence_states=p + 2, short_record_states=None, short_record_scores=empty,
+            evidence_states=p + 2, short_record_states=None, short_record_limit=None,
+            short_record_scores=empty,
             short_record_fitted_start=False,
             reason="records too short for the subspace projection: p + 2 states",
         )  # fmt: skip
@@ -175,6 +177,7 @@ def select_order(est, train, val, n_weights) -> Bunch:
         reliable=RELIABLE_NRMSE,
         evidence_states=cap.evidence_states,
         short_record_states=cap.short_record_states,
+        short_record_limit=cap.short_record_limit,
         short_record_scores=cap.short_record_scores,
         short_record_fitted_start=fitted_start,
         reason=cap.reason,
@@ -184,39 +187,52 @@ def select_order(est, train, val, n_weights) -> Bunch:
 def short_record_cap(
     est, orders, scores, n_states, n_weights, n_samples, fitted_start=False
 ) -> Bunch:
-    """The order the evidence found, or the short-record rule's, by validation.
+    """The order the evidence found, or a lower one, by validation.
 
     The rule lowers ``n_states`` until the network has at most one weight
     per :data:`SAMPLES_PER_WEIGHT` training samples (times outputs), down to
-    ``p + 2``. Where it lowers it, the lower order is a candidate beside the
-    evidence's: it is kept where the best validation free run of the
-    linear models of ``orders`` up to it (``scores``) is within
-    :data:`SHORT_RECORD_TOLERANCE` (plus :data:`ORDER_FLOOR`) of the best
-    up to the evidence's order (a network of fewer weights that misses no
-    mode a linear model sees), with a :class:`UserWarning`; otherwise the
-    evidence's order stays. Returns a Bunch: ``n_states`` (the order kept),
-    ``evidence_states``, ``short_record_states`` (None where the rule does
-    not lower it), ``short_record_scores`` (the best validation free-run
-    NRMSE of the linear models up to each of the two, evidence first; empty
-    where the rule does not lower it) and ``reason`` (one sentence).
-    ``fitted_start``: the scores are of runs from fitted states (see
-    :func:`_fitted_start_judges`), which the reason says.
+    ``p + 2``. Where it lowers it, every order from that limit up to the
+    evidence's is a candidate: the smallest whose linear models (the best
+    validation free run of those of ``orders`` up to it, ``scores``)
+    validate within :data:`SHORT_RECORD_TOLERANCE` (plus
+    :data:`ORDER_FLOOR`) of the best up to the evidence's order is kept (a
+    network of fewer weights that misses no mode a linear model sees), with
+    a :class:`UserWarning`; where none does, the evidence's order stays.
+    Returns a Bunch: ``n_states`` (the order kept), ``evidence_states``,
+    ``short_record_states`` (the candidate kept, or the limit where none
+    was; None where the rule does not lower the order),
+    ``short_record_limit`` (the limit; None likewise),
+    ``short_record_scores`` (the best validation free-run NRMSE of the
+    linear models up to the evidence's order and up to
+    ``short_record_states``; empty where the rule does not lower it) and
+    ``reason`` (one sentence). ``fitted_start``: the scores are of runs
+    from fitted states (see :func:`_fitted_start_judges`), which the reason
+    says.
     """
     p = est.n_outputs_
-    lowered = n_states
-    while lowered > p + 2 and n_weights(lowered) * SAMPLES_PER_WEIGHT > n_samples:
-        lowered -= 1
-    if lowered == n_states:
+    limit = n_states
+    while limit > p + 2 and n_weights(limit) * SAMPLES_PER_WEIGHT > n_samples:
+        limit -= 1
+    if limit == n_states:
         return Bunch(
             n_states=n_states, evidence_states=n_states, short_record_states=None,
-            short_record_scores=np.array([]), reason="the order the evidence found",
+            short_record_limit=None, short_record_scores=np.array([]),
+            reason="the order the evidence found",
         )  # fmt: skip
     # A network of n states holds the linear models of every order up to n:
     # each order is scored by the best of those (the candidates' scores).
-    scores = np.array(
-        [np.min(scores[orders <= n], initial=np.inf) for n in (n_states, lowered)]
-    )
-    kept = scores[1] <= (1.0 + SHORT_RECORD_TOLERANCE) * scores[0] + ORDER_FLOOR
+    # Orders between the limit and the evidence's are candidates too: on a
+    # lightly damped chain of two modes held out 30 %, the evidence's 8
+    # states against a limit of 3, which misses a mode, where 4 hold both.
+    best = {
+        n: np.min(scores[orders <= n], initial=np.inf)
+        for n in range(limit, n_states + 1)
+    }
+    bound = (1.0 + SHORT_RECORD_TOLERANCE) * best[n_states] + ORDER_FLOOR
+    passing = [n for n in range(limit, n_states) if best[n] <= bound]
+    kept = bool(passing)
+    lowered = passing[0] if kept else limit
+    scores = np.array([best[n_states], best[lowered]])
     start = ", from states fitted to the first samples" if fitted_start else ""
     per_weight = (
         f"the training records hold fewer than {SAMPLES_PER_WEIGHT} samples per "
@@ -225,7 +241,8 @@ def short_record_cap(
     if kept:
         reason = (
             f"{per_weight}, and the linear models of up to {lowered} states "
-            f"validate within {100 * SHORT_RECORD_TOLERANCE:g} % of those up to "
+            f"(the fewest from {limit} up) validate within "
+            f"{100 * SHORT_RECORD_TOLERANCE:g} % of those up to "
             f"{n_states} (free-run NRMSE {scores[1]:.3g} against {scores[0]:.3g}"
             f"{start})"
         )
@@ -238,15 +255,16 @@ def short_record_cap(
         )
     else:
         reason = (
-            f"{per_weight}, but the linear models of up to {lowered} states "
-            f"validate worse (free-run NRMSE {scores[1]:.3g} against {scores[0]:.3g}"
-            f"{start}): "
+            f"{per_weight}, but the linear models of up to {limit} to "
+            f"{n_states - 1} states validate worse (free-run NRMSE {scores[1]:.3g} "
+            f"up to {limit} against {scores[0]:.3g}{start}): "
             "the evidence's order is kept"
         )
     return Bunch(
         n_states=lowered if kept else n_states,
         evidence_states=n_states,
         short_record_states=lowered,
+        short_record_limit=limit,
         short_record_scores=scores,
         reason=reason,
     )

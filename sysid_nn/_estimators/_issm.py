@@ -236,12 +236,16 @@ class ISSMRegressor(_RecurrentRegressorBase):
         rule's constants).
         Records too short for the projection get ``p + 2`` states, with
         empty evidence and ``linear_order=None``. The short-record rule:
-        ``evidence_states`` (the order before it), ``short_record_states``
-        (the order it offers, None where it does not lower the order),
+        ``evidence_states`` (the order before it), ``short_record_limit``
+        (the order at which the network has one weight per ten training
+        samples, None where the rule does not lower the order),
+        ``short_record_states`` (the smallest order from that limit up whose
+        linear models validate as well, else the limit; None likewise),
         ``short_record_scores`` (the best validation NRMSE of the linear
-        models up to each, evidence first) and ``reason`` (the decision in
-        one sentence); the lower order is kept only where it validates as
-        well, with a warning.
+        models up to the evidence's order and up to
+        ``short_record_states``) and ``reason`` (the decision in one
+        sentence); a lower order is kept only where it validates as well,
+        with a warning.
     shooting_ : {"filter", "measured"}
         How the multiple-shooting segments of the simulation focus start:
         from the model's own one-step predictor, or from the measured
