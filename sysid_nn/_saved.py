@@ -50,23 +50,38 @@ _INFO_KEYS = ("inputs", "outputs", "dt", "units", "files", "split_by", "label")
 
 def _estimators() -> dict[str, type]:
     """The estimator classes a model file may hold, by the name it stores."""
+    from sysid_nn._estimators._ensemble import EnsembleRegressor
     from sysid_nn._estimators._issm import ISSMRegressor
     from sysid_nn._estimators._tdl import TDLRegressor
 
-    return {"TDLRegressor": TDLRegressor, "ISSMRegressor": ISSMRegressor}
+    return {
+        "TDLRegressor": TDLRegressor,
+        "ISSMRegressor": ISSMRegressor,
+        "EnsembleRegressor": EnsembleRegressor,
+    }
 
 
-def check_network(estimator: Any) -> None:
+def check_network(estimator: Any, *, ensemble: bool = False) -> None:
     """Raise unless ``estimator`` is a fitted ``TDLRegressor`` or
-    ``ISSMRegressor`` (what a model file and an ONNX graph can hold)."""
+    ``ISSMRegressor``, or, with ``ensemble``, a fitted ``EnsembleRegressor``
+    of them (a model file holds one; an ONNX graph does not)."""
     from sklearn.utils.validation import check_is_fitted
 
-    if type(estimator) not in _estimators().values():
+    from sysid_nn._estimators._ensemble import EnsembleRegressor
+
+    kind = type(estimator)
+    if kind is EnsembleRegressor and not ensemble:
         raise TypeError(
-            "estimator must be a TDLRegressor or an ISSMRegressor, got "
-            f"{type(estimator).__name__}."
+            "estimator must be a TDLRegressor or an ISSMRegressor, got an "
+            "EnsembleRegressor: its median is not one network; export a "
+            "member (estimators_[k]) instead."
         )
-    check_is_fitted(estimator, "coefs_")
+    if kind not in _estimators().values():
+        allowed = "a TDLRegressor, an ISSMRegressor or an EnsembleRegressor"
+        if not ensemble:
+            allowed = "a TDLRegressor or an ISSMRegressor"
+        raise TypeError(f"estimator must be {allowed}, got {kind.__name__}.")
+    check_is_fitted(estimator, "estimators_" if kind is EnsembleRegressor else "coefs_")
 
 
 def _dataclasses() -> dict[str, type]:
@@ -138,7 +153,7 @@ def _write(path: str | os.PathLike, estimator: Any, info: dict) -> None:
     """Write ``estimator`` and ``info`` (see ``_INFO_KEYS``) to ``path``."""
     from sysid_nn import __version__
 
-    check_network(estimator)
+    check_network(estimator, ensemble=True)
     encode = _Encoder()
     header = {
         "format": _FORMAT,
@@ -176,8 +191,8 @@ def save_model(
 
     Parameters
     ----------
-    estimator : TDLRegressor or ISSMRegressor
-        A fitted estimator.
+    estimator : TDLRegressor, ISSMRegressor or EnsembleRegressor
+        A fitted estimator (an ensemble is saved with its members).
     path : str or path-like
         The file to write (replaced if it exists); ``.sysid`` is the
         suggested extension.
@@ -194,7 +209,7 @@ def save_model(
     Raises
     ------
     TypeError
-        ``estimator`` is not a TDL or ISSM regressor, or holds an attribute
+        ``estimator`` is not a TDL, ISSM or ensemble regressor, or holds an attribute
         of a type the format cannot hold.
     NotFittedError
         ``estimator`` is not fitted.

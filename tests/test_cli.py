@@ -133,6 +133,52 @@ def records(tmp_path_factory):
 TINY_FIT = ["--n-init", "1", "--max-iter", "5", "--dt", "0.01"]
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_a_saved_ensemble_validates_as_its_median(records, tmp_path, capsys):
+    from sysid_nn import EnsembleRegressor, TDLRegressor, load_model, save_model
+
+    (a, b), many = records
+    train = [pd.read_csv(path) for path in (a, b)]
+    member = TDLRegressor(
+        hidden_layer_sizes=(3,), output_lags=2, input_lags=2, n_init=1, max_iter=5
+    )
+    ensemble = EnsembleRegressor(member, n_members=3, random_state=0).fit(
+        [f[["force"]].to_numpy() for f in train],
+        [f["displacement"].to_numpy() for f in train],
+    )
+    model = tmp_path / "ensemble.sysid"
+    save_model(ensemble, model, inputs=["force"], outputs=["displacement"], dt=0.01)
+    loaded = load_model(model)
+    assert type(loaded) is EnsembleRegressor
+    # Every parameter, the member's (estimator__*) included, but the member
+    # object itself (compared by identity).
+    params = [{k: v for k, v in e.get_params().items() if k != "estimator"}
+              for e in (loaded, ensemble)]  # fmt: skip
+    assert params[0] == params[1] and "estimator__output_lags" in params[0]
+    part = pd.read_csv(many).query("realization == 2")
+    X, y = part[["force"]].to_numpy(), part["displacement"].to_numpy()
+    np.testing.assert_array_equal(loaded.simulate(X), ensemble.simulate(X))
+    np.testing.assert_array_equal(loaded.predict(X, y), ensemble.predict(X, y))
+    for saved, member in zip(loaded.estimators_, ensemble.estimators_, strict=True):
+        for w, v in zip(saved.coefs_, member.coefs_, strict=True):
+            np.testing.assert_array_equal(w, v)
+    # The command line validates it as the ensemble's median free run.
+    out = tmp_path / "validation"
+    argv = ["validate", "--model", str(model), str(many), "--split-by", "realization"]
+    assert main([*argv, "--out", str(out), "--max-lag", "10", "--quiet"]) == 0
+    row = pd.read_csv(out / "results.csv").query("record == 0 and mode == 'simulation'")
+    rmse = np.sqrt(np.mean((y - ensemble.simulate(X)) ** 2))
+    np.testing.assert_allclose(row["nrmse"].iloc[0], rmse / np.std(y), rtol=1e-10)
+    report = (out / "report.md").read_text()
+    assert "the model is an ensemble of 3 networks" in report
+    # Its parameters on one line of the models' table, its member's included.
+    assert "output_lags=2), n_members=3 |" in report
+    # Its median has no band: the command says so.
+    argv += ["--out", str(tmp_path / "band"), "--band", "0.95", "--quiet"]
+    assert main(argv) == 2
+    assert "return_std" in capsys.readouterr().err
+
+
 def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     (a, b), many = records
     model = tmp_path / "model.sysid"

@@ -8,8 +8,9 @@ import numpy as np
 import onnxruntime as ort
 import pytest
 from scipy.signal import dlsim
+from sklearn.base import clone
 
-from sysid_nn import export_onnx, to_dlti
+from sysid_nn import EnsembleRegressor, export_onnx, to_dlti
 
 KINDS = [(kind, p) for kind in ("linear", "tdl", "issm") for p in (1, 2)]
 IDS = [f"{kind}-{p}" for kind, p in KINDS]
@@ -123,6 +124,15 @@ def test_export_needs_a_fitted_estimator_and_onnx(fitted_models, tmp_path, monke
 
     with pytest.raises(TypeError, match="TDLRegressor or an ISSMRegressor"):
         export_onnx(Ridge(), tmp_path / "m.onnx")
+    est, X, y = fitted_models["tdl", 1]
+    ensemble = EnsembleRegressor(clone(est), n_members=2, random_state=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ensemble.fit(X, y)
+    with pytest.raises(TypeError, match=r"export a member \(estimators_\[k\]\)"):
+        export_onnx(ensemble, tmp_path / "m.onnx")
+    with pytest.raises(TypeError, match="got an EnsembleRegressor"):
+        to_dlti(ensemble)
     with pytest.raises(NotFittedError):
         to_dlti(ISSMRegressor())
     monkeypatch.setitem(sys.modules, "onnx", None)  # not installed

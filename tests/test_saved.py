@@ -154,7 +154,7 @@ def test_save_model_checks_its_arguments(fitted_models, tmp_path):
         save_model(est, tmp_path / "m.sysid", inputs=["u"])
     with pytest.raises(ValueError, match="dt must be a finite number > 0"):
         save_model(est, tmp_path / "m.sysid", dt=-1.0)
-    with pytest.raises(TypeError, match="TDLRegressor or an ISSMRegressor"):
+    with pytest.raises(TypeError, match="an ISSMRegressor or an EnsembleRegressor"):
         save_model(Ridge(), tmp_path / "m.sysid")
     with pytest.raises(NotFittedError):
         save_model(TDLRegressor(), tmp_path / "m.sysid")

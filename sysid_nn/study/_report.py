@@ -136,14 +136,19 @@ def _mode_table(
 
 
 def _non_default_params(estimator: Any) -> str:
-    defaults = type(estimator)().get_params()
+    defaults = type(estimator)().get_params(deep=False)
     skip = {"random_state", "n_jobs", "verbose"}
+    # By repr: an ensemble's member is an estimator, equal only to itself.
     changed = {
         k: v
-        for k, v in estimator.get_params().items()
-        if k not in skip and v != defaults[k]
+        for k, v in estimator.get_params(deep=False).items()
+        if k not in skip and repr(v) != repr(defaults[k])
     }
-    return ", ".join(f"{k}={v!r}" for k, v in changed.items()) or "defaults"
+    # One line per table cell: a member's repr may wrap.
+    return (
+        ", ".join(f"{k}={' '.join(repr(v).split())}" for k, v in changed.items())
+        or "defaults"
+    )
 
 
 def _versions() -> str:
@@ -366,7 +371,9 @@ def write_report(
                 else f"{', '.join(m.inputs)} -> {', '.join(m.outputs)}",
                 "parameters": _non_default_params(est),
                 "iterations": getattr(est, "n_iter_", ""),
-                "fit time [s]": round(float(getattr(est, "fit_time_", np.nan)), 1),
+                "fit time [s]": (
+                    round(float(est.fit_time_), 1) if hasattr(est, "fit_time_") else ""
+                ),
             }
         )
     lines = [f"# {title}", ""]
