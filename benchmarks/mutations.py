@@ -134,8 +134,8 @@ MUTATIONS = (
     Mutation(
         "short-record order always",
         "sysid_nn/_engine/_order.py",
-        "passing = [n for n in range(limit, n_states) if best[n] <= bound]",
-        "passing = list(range(limit, n_states))",
+        "passing = [n for n in tried if best[n] <= bound]",
+        "passing = list(tried)",
         (
             "tests/test_order.py::test_short_record_order_that_misses_the_dynamics_"
             "gives_way_to_one_that_holds_them",
@@ -144,17 +144,26 @@ MUTATIONS = (
     Mutation(
         "short-record candidates the limit alone",
         "sysid_nn/_engine/_order.py",
-        "passing = [n for n in range(limit, n_states) if best[n] <= bound]",
-        "passing = [n for n in (limit,) if best[n] <= bound]",
+        "passing = [n for n in tried if best[n] <= bound]",
+        "passing = [n for n in tried[:1] if best[n] <= bound]",
         (
             "tests/test_order.py::"
             "test_evidence_order_stays_where_no_lower_order_validates_as_well",
         ),
     ),
     Mutation(
+        "short-record orders between the limit and the evidence for the TDL",
+        "sysid_nn/_estimators/_base.py",
+        "between=self._orders_between,",
+        "between=True,",
+        (
+            "tests/test_order.py::test_tdl_lags_are_the_short_record_limit_or_the_evidence",
+        ),
+    ),
+    Mutation(
         "short-record order never",
         "sysid_nn/_engine/_order.py",
-        "passing = [n for n in range(limit, n_states) if best[n] <= bound]",
+        "passing = [n for n in tried if best[n] <= bound]",
         "passing = []",
         ("tests/test_order.py::test_short_records_lower_the_order",),
     ),

@@ -194,6 +194,12 @@ def test_evidence_order_stays_where_no_lower_order_validates_as_well():
     )
     assert sel.n_states == sel.short_record_states == 6
     np.testing.assert_array_equal(sel.short_record_scores, [0.1, 0.125])
+    # With the limit as the one candidate (the TDL's lags) the evidence stays.
+    sel = short_record_cap(
+        Network(), orders, scores, 8, lambda n: 100 * n, n_samples=5000,
+        between=False,
+    )  # fmt: skip
+    assert sel.n_states == 8 and sel.short_record_states == 5
 
 
 def test_short_record_order_kept_where_the_evidence_gains_little():
@@ -399,6 +405,23 @@ def test_short_records_lower_the_tdl_lags():
     assert SAMPLES_PER_WEIGHT * short._weights_at_order(n) <= 1200
     assert SAMPLES_PER_WEIGHT * short._weights_at_order(n + 1) > 1200
     assert short._weights_at_order(n) == len(short.coefs_)
+
+
+def test_tdl_lags_are_the_short_record_limit_or_the_evidence():
+    # The TDL's candidates are its limit and the evidence's order only:
+    # 1000 samples allow 4 lags, which miss a mode of the six, so the
+    # evidence's 12 stay although 6 would validate as well (with lags
+    # between the two its linear model tested worse on a chain in motion).
+    X, y = _sixth_order(1000, 0)
+    Xv, yv = _sixth_order(1000, 1)
+    model = TDLRegressor(n_init=1, max_iter=1, random_state=0).fit(
+        X, y, X_val=Xv, y_val=yv
+    )
+    sel = model.order_selection_
+    assert sel.short_record_limit == sel.short_record_states == 4
+    assert model.output_lags_ == sel.evidence_states == 12
+    assert np.min(sel.scores[sel.orders <= 6]) <= 1.01 * np.min(sel.scores)
+    assert "the linear models of up to 4 states validate worse" in sel.reason
 
 
 def test_grid_search_over_given_lags_beside_auto():

@@ -90,12 +90,14 @@ AUTO_WIDTH = 7
 RELIABLE_NRMSE = 0.4
 
 
-def select_order(est, train, val, n_weights) -> Bunch:
+def select_order(est, train, val, n_weights, between: bool = True) -> Bunch:
     """Choose the number of states from ``train``, scored on ``val``.
 
     ``est`` is the estimator being fitted (standardisation and sizes set);
     ``n_weights(n)`` counts the weights of its network with ``n`` states
-    (the short-records rule).
+    (the short-records rule); ``between``: whether the orders between the
+    short-records limit and the evidence's are candidates too (see
+    :func:`short_record_cap`).
     Returns the Bunch stored as ``order_selection_``: ``orders`` (the
     candidates), ``scores`` (validation free-run NRMSE of their linear
     models, ``inf`` for one that diverged), ``singular_values`` (of the
@@ -160,7 +162,7 @@ def select_order(est, train, val, n_weights) -> Bunch:
     fitted_start = _fitted_start_judges(runs)
     cap = short_record_cap(
         est, orders, runs[:, 2] if fitted_start else scores, n_states, n_weights,
-        len(train.modelled) * p, fitted_start,
+        len(train.modelled) * p, fitted_start, between,
     )  # fmt: skip
     n_states = cap.n_states
     return Bunch(
@@ -185,8 +187,9 @@ def select_order(est, train, val, n_weights) -> Bunch:
 
 
 def short_record_cap(
-    est, orders, scores, n_states, n_weights, n_samples, fitted_start=False
-) -> Bunch:
+    est, orders, scores, n_states, n_weights, n_samples, fitted_start=False,
+    between=True,
+) -> Bunch:  # fmt: skip
     """The order the evidence found, or a lower one, by validation.
 
     The rule lowers ``n_states`` until the network has at most one weight
@@ -221,15 +224,16 @@ def short_record_cap(
         )  # fmt: skip
     # A network of n states holds the linear models of every order up to n:
     # each order is scored by the best of those (the candidates' scores).
-    # Orders between the limit and the evidence's are candidates too: on a
-    # lightly damped chain of two modes held out 30 %, the evidence's 8
+    # Orders between the limit and the evidence's can be candidates too: on
+    # a lightly damped chain of two modes held out 30 %, the evidence's 8
     # states against a limit of 3, which misses a mode, where 4 hold both.
     best = {
         n: np.min(scores[orders <= n], initial=np.inf)
         for n in range(limit, n_states + 1)
     }
     bound = (1.0 + SHORT_RECORD_TOLERANCE) * best[n_states] + ORDER_FLOOR
-    passing = [n for n in range(limit, n_states) if best[n] <= bound]
+    tried = range(limit, n_states) if between else (limit,)
+    passing = [n for n in tried if best[n] <= bound]
     kept = bool(passing)
     lowered = passing[0] if kept else limit
     scores = np.array([best[n_states], best[lowered]])
@@ -238,13 +242,14 @@ def short_record_cap(
         f"the training records hold fewer than {SAMPLES_PER_WEIGHT} samples per "
         f"weight of the network of {n_states} states"
     )
+    fewest = f" (the fewest from {limit} up)" if between and lowered > limit else ""
+    tested = f"{limit} to {n_states - 1}" if between and limit < n_states - 1 else limit
     if kept:
         reason = (
-            f"{per_weight}, and the linear models of up to {lowered} states "
-            f"(the fewest from {limit} up) validate within "
-            f"{100 * SHORT_RECORD_TOLERANCE:g} % of those up to "
-            f"{n_states} (free-run NRMSE {scores[1]:.3g} against {scores[0]:.3g}"
-            f"{start})"
+            f"{per_weight}, and the linear models of up to {lowered} states"
+            f"{fewest} validate within {100 * SHORT_RECORD_TOLERANCE:g} % of "
+            f"those up to {n_states} (free-run NRMSE {scores[1]:.3g} against "
+            f"{scores[0]:.3g}{start})"
         )
         warnings.warn(
             f"{type(est).__name__} lowered the order the records show from "
@@ -255,10 +260,9 @@ def short_record_cap(
         )
     else:
         reason = (
-            f"{per_weight}, but the linear models of up to {limit} to "
-            f"{n_states - 1} states validate worse (free-run NRMSE {scores[1]:.3g} "
-            f"up to {limit} against {scores[0]:.3g}{start}): "
-            "the evidence's order is kept"
+            f"{per_weight}, but the linear models of up to {tested} states "
+            f"validate worse (free-run NRMSE {scores[1]:.3g} up to {limit} "
+            f"against {scores[0]:.3g}{start}): the evidence's order is kept"
         )
     return Bunch(
         n_states=lowered if kept else n_states,

@@ -373,9 +373,17 @@ class _RecurrentRegressorBase(
         if not self._order_from_data():
             return
         self.order_selection_ = select_order(
-            self, train, train if val is None else val, self._weights_at_order
+            self,
+            train,
+            train if val is None else val,
+            self._weights_at_order,
+            between=self._orders_between,
         )
         self._set_order(int(self.order_selection_.n_states))
+
+    #: Whether the orders between the short-records limit and the
+    #: evidence's are candidates (see ``_order.short_record_cap``).
+    _orders_between = False
 
     def _order_from_data(self) -> bool:
         """Whether the structure's order is ``"auto"``."""

@@ -485,6 +485,10 @@ default=None
             )
         self.n_states_ = int(self.n_states) if self.n_states is not None else p + 2
 
+    # States between the short-records limit and the evidence's are
+    # candidates: each holds the modes a linear model of that order sees.
+    _orders_between = True
+
     def _order_from_data(self) -> bool:
         return self.n_states == "auto" and self.init != "tdl"
 
