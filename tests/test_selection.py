@@ -304,9 +304,9 @@ def test_the_choice_among_restarts_is_explained_by_fitted_attributes(monkeypatch
     checked = []
     check = _selection.bounded_beyond_range
 
-    def unbounded_winner(est, w, train):
+    def unbounded_winner(est, w, train, like=()):
         checked.append(w)
-        return len(checked) - 1 != winner and check(est, w, train)
+        return len(checked) - 1 != winner and check(est, w, train, like)
 
     monkeypatch.setattr(_selection, "bounded_beyond_range", unbounded_winner)
     held = TDLRegressor(**params).fit(X, y, X_val=Xv, y_val=yv)
@@ -812,8 +812,10 @@ def test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen(monkeypa
     from sysid_nn._engine._selection import LinearCandidate, choose, excursion_ratios
 
     # The constant-input check alone: these linear restarts also leave the
-    # bound at twice the amplitude, which would hold them out on its own.
+    # bound at twice the amplitude and the linear model's reach under
+    # excitations like the records', which would hold them out on their own.
     monkeypatch.setattr(_selection, "_AMPLITUDE_PEAK", np.inf)
+    monkeypatch.setattr(_selection, "_SURROGATES", 0)
 
     model, train = _first_order_tdl()
     linear = LinearCandidate(

@@ -102,6 +102,17 @@ _SIGNIFICANT = 2.0
 #: went wild on an unseen record 9.9-37 times.
 _AMPLITUDE_MARGIN = 2.0
 _AMPLITUDE_PEAK = 5.0
+#: ... or under excitations like the training records': the training
+#: excitation with its Fourier phases drawn anew (its spectrum and range
+#: kept), this many draws from a fixed seed, where a run leaves
+#: ``_AMPLITUDE_MARGIN`` times the larger of the training outputs' largest
+#: value and the linear model's under the same excitation. On Silverbox an
+#: ISSM fit (two restarts, ``random_state=2``) that validated and tested on
+#: the multisine at 0.58 mV went to 204 / 229 mV on the benchmark's arrow
+#: records: under three such draws it reached 3.4, 1.1 and 97 times the
+#: training outputs' largest value, a default fit 1.06-1.10 times.
+_SURROGATES = 2
+_SURROGATE_SEED = 0
 #: ... or whose free runs from rest under constant inputs, held at these
 #: quantiles of the training excitation,
 _LEVELS = (0.0, 0.25, 0.5, 0.75, 1.0)
@@ -531,22 +542,72 @@ def validation_advantage(est, w: np.ndarray, than: np.ndarray, val, seg: int) ->
     return float(loss_differential_statistic(d, bounds, lag))
 
 
-def bounded_beyond_range(est, w: np.ndarray, train) -> bool:
+def bounded_beyond_range(est, w: np.ndarray, train, like=()) -> bool:
     """Whether ``w``'s free run stays bounded at twice the training amplitude.
 
     The training excitation, standardised, is scaled by
     ``_AMPLITUDE_MARGIN`` about its mean and the model run from rest; it
     must neither leave the divergence bound nor ``_AMPLITUDE_PEAK`` times
-    the training outputs' largest standardised value.
+    the training outputs' largest standardised value. ``like``: pairs of an
+    excitation like the training records' and the largest standardised
+    output a run under it may reach (:func:`surrogate_bounds`).
     """
     louder = replace(train, U=train.U * _AMPLITUDE_MARGIN)
     Yhat, _, diverged, _ = est._run(w, louder, _FREE_RUN, False, keep_state=False)
     if (diverged >= 0).any():
         return False
     rows = train.modelled
-    return bool(
-        np.abs(Yhat[rows]).max() <= _AMPLITUDE_PEAK * np.abs(train.Y[rows]).max()
-    )
+    if np.abs(Yhat[rows]).max() > _AMPLITUDE_PEAK * np.abs(train.Y[rows]).max():
+        return False
+    return all(_peak(est, w, data) <= reach for data, reach in like)
+
+
+def _peak(est, w: np.ndarray, data) -> float:
+    """The largest standardised output of ``w``'s free run from rest on
+    ``data`` (``inf`` where it diverges)."""
+    Yhat, _, diverged, _ = est._run(w, data, _FREE_RUN, False, keep_state=False)
+    if (diverged >= 0).any():
+        return np.inf
+    return float(np.abs(Yhat[data.modelled]).max())
+
+
+def surrogate_excitation(train, rng: np.random.Generator):
+    """``train`` with each sequence's modelled excitation rows replaced by a
+    record like them: their Fourier phases drawn anew (one draw for every
+    channel, so cross-spectra stay), the amplitude spectrum and mean kept,
+    clipped to each channel's range in the sequence."""
+    U = train.U.copy()
+    for a, b in _segments(train.starts, train.h):
+        u = train.U[a:b]
+        spectrum = np.fft.rfft(u - u.mean(axis=0), axis=0)
+        turn = np.exp(2j * np.pi * rng.random(len(spectrum)))
+        turn[0] = 1.0
+        if (b - a) % 2 == 0:
+            turn[-1] = 1.0  # the Nyquist term stays real
+        drawn = np.fft.irfft(spectrum * turn[:, None], n=b - a, axis=0)
+        U[a:b] = np.clip(drawn + u.mean(axis=0), u.min(axis=0), u.max(axis=0))
+    return replace(train, U=U)
+
+
+def surrogate_bounds(est, train, linear) -> list:
+    """``(excitation, reach)`` pairs for :func:`bounded_beyond_range`:
+    :data:`_SURROGATES` excitations like the training records'
+    (:func:`surrogate_excitation`, from :data:`_SURROGATE_SEED`), each with
+    ``_AMPLITUDE_MARGIN`` times the larger of the training outputs' largest
+    standardised value and the linear model's under it. Empty without a
+    linear model; a draw under which the linear model diverges is left out
+    (no reference: an integrating plant's drift is real)."""
+    if linear is None:
+        return []
+    rng = np.random.default_rng(_SURROGATE_SEED)
+    reach = np.abs(train.Y[train.modelled]).max()
+    pairs = []
+    for _ in range(_SURROGATES):
+        data = surrogate_excitation(train, rng)
+        lin_peak = _peak(est, linear.w, data)
+        if np.isfinite(lin_peak):
+            pairs.append((data, _AMPLITUDE_MARGIN * max(reach, lin_peak)))
+    return pairs
 
 
 def level_responses(
@@ -662,10 +723,11 @@ def choose(
     loss of its closed-form fits, the runs ``closed_form`` indexes.
     """
     excursions = excursion_ratios(est, runs, train, linear)
+    like = surrogate_bounds(est, train, linear)
     bounded = [
         np.isfinite(r.criterion)
         and bool(x <= 1.0)
-        and bounded_beyond_range(est, r.w, train)
+        and bounded_beyond_range(est, r.w, train, like)
         for r, x in zip(runs, excursions, strict=True)
     ]
     pool = [r for r, ok in zip(runs, bounded, strict=True) if ok] or runs
