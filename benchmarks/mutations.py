@@ -272,6 +272,46 @@ MUTATIONS = (
         (f"{POLICY}::test_linear_model_is_judged_as_the_networks_are",),
     ),
     Mutation(
+        "records-like excitations not judged",
+        "sysid_nn/_engine/_selection.py",
+        "    like = surrogate_bounds(est, train, linear)",
+        "    like = []",
+        (
+            "tests/test_selection.py::test_network_wi"
+            "ld_under_excitations_like_the_records_is_not_chosen",
+        ),
+    ),
+    Mutation(
+        "records-like excitations judged at the wild-run peak",
+        "sysid_nn/_engine/_selection.py",
+        "pairs.append((data, _AMPLITUDE_MARGIN * max(reach, lin_peak)))",
+        "pairs.append((data, _AMPLITUDE_PEAK * max(reach, lin_peak)))",
+        (
+            "tests/test_selection.py::test_network_wi"
+            "ld_under_excitations_like_the_records_is_not_chosen",
+        ),
+    ),
+    Mutation(
+        "records-like excitations judged without the linear model",
+        "sysid_nn/_engine/_selection.py",
+        "pairs.append((data, _AMPLITUDE_MARGIN * max(reach, lin_peak)))",
+        "pairs.append((data, _AMPLITUDE_MARGIN * reach))",
+        (
+            "tests/test_selection.py::test_network_wi"
+            "ld_under_excitations_like_the_records_is_not_chosen",
+        ),
+    ),
+    Mutation(
+        "records-like excitations with their phases kept",
+        "sysid_nn/_engine/_selection.py",
+        "        turn = np.exp(2j * np.pi * rng.random(len(spectrum)))",
+        "        turn = np.exp(0j * rng.random(len(spectrum)))",
+        (
+            "tests/test_selection.py::"
+            "test_surrogate_excitation_keeps_spectrum_range_and_history",
+        ),
+    ),
+    Mutation(
         "run ends worse than its start",
         "sysid_nn/_engine/_training.py",
         "        if start_loss < loss or not np.isfinite(loss):",

@@ -475,6 +475,89 @@ def test_restart_that_diverges_beyond_the_training_range_is_not_chosen():
     assert bounded == [False, True]
 
 
+def test_surrogate_excitation_keeps_spectrum_range_and_history():
+    from sysid_nn._engine._selection import surrogate_excitation
+
+    _, train = _first_order_tdl()
+    a, b = train.h, len(train.U)
+    one = surrogate_excitation(train, np.random.default_rng(0))
+    again = surrogate_excitation(train, np.random.default_rng(0))
+    other = surrogate_excitation(train, np.random.default_rng(1))
+    np.testing.assert_array_equal(one.U, again.U)  # reproducible
+    assert not np.allclose(one.U[a:b], other.U[a:b])
+    assert not np.allclose(one.U[a:b], train.U[a:b])
+    np.testing.assert_array_equal(one.U[:a], train.U[:a])  # history rows
+    np.testing.assert_array_equal(one.Y, train.Y)
+    u, v = train.U[a:b, 0], one.U[a:b, 0]
+    assert u.min() <= v.min() and v.max() <= u.max()
+    # The amplitude spectrum, but where clipping to the range acted.
+    spectra = [np.abs(np.fft.rfft(x - u.mean())) for x in (u, v)]
+    assert np.corrcoef(*spectra)[0, 1] > 0.99
+    assert np.mean(v) == pytest.approx(np.mean(u), abs=0.05 * np.std(u))
+
+
+def test_network_wild_under_excitations_like_the_records_is_not_chosen():
+    # A binary excitation (standardised about +-1, at rest 0). Two hidden
+    # nodes that together wake up only for an excitation lag between 0.3 and
+    # 0.7 leave the training run, and the run at twice its amplitude, as
+    # they are; under the records' spectrum with other phases (values
+    # between the two levels) they throw the output far out.
+    from sysid_nn._engine._selection import (
+        LinearCandidate,
+        bounded_beyond_range,
+        choose,
+        surrogate_bounds,
+    )
+    from sysid_nn._records._data import _FREE_RUN
+
+    u = np.sign(np.random.default_rng(3).standard_normal(800))[:, None]
+    y = lfilter([0.0, 0.5], [1.0, -0.5], u[:, 0])
+    model = TDLRegressor(
+        output_lags=1, input_lags=2, hidden_layer_sizes=(2,), activation="logistic",
+        lag_representation="delays", n_init=1, max_iter=5, early_stopping=False,
+        random_state=0,
+    ).fit(u, y)  # fmt: skip
+    train = model._stack([u], [y[:, None]])
+    hidden, out = model._layout().layers
+    good = model.coefs_.copy()
+    good[out.weights] = 0.0  # the bypass alone: the linear model
+    wild = good.copy()
+    lag = hidden.weights.start + model.output_lags_ * model.n_outputs_
+    level = np.abs(train.U[train.modelled]).mean()  # the standardised levels
+    for j, edge in enumerate((0.3, 0.7)):
+        wild[lag + j * hidden.n_in] = 100.0 / level
+        wild[hidden.biases.start + j] = -100.0 * edge
+    reach = np.abs(train.Y[train.modelled]).max()
+    # Four times the training outputs' reach under such excitations.
+    wild[out.weights] = [2 * reach, -2 * reach]
+    np.testing.assert_allclose(
+        model._run(wild, train, _FREE_RUN, False)[0],
+        model._run(good, train, _FREE_RUN, False)[0],
+        atol=1e-9,
+    )
+    assert bounded_beyond_range(model, wild, train)  # training-amplitude checks
+    linear = LinearCandidate(run=_run(good.copy(), 1.0, 1.0), w=good.copy())
+    like = surrogate_bounds(model, train, linear)
+    assert len(like) == 2
+    assert bounded_beyond_range(model, good, train, like)
+    assert not bounded_beyond_range(model, wild, train, like)
+    assert surrogate_bounds(model, train, None) == []  # no linear reference
+    # Judged against the linear model's run under the same excitation: a
+    # linear model of three times the gain reaches as far itself.
+    louder = good.copy()
+    u_cols = model.output_lags_ * model.n_outputs_ + np.arange(2)
+    louder[model._layout().bypass.start + u_cols] *= 3.0  # excitation lags
+    steep = surrogate_bounds(
+        model, train, LinearCandidate(run=_run(louder, 1.0, 1.0), w=louder)
+    )
+    assert len(steep) == 2 and all(r > 5 * reach for _, r in steep)
+    assert bounded_beyond_range(model, wild, train, steep)
+    runs = [_run(wild, 0.1, 0.1), _run(good.copy(), 0.5, 0.5)]
+    chosen, selected, bounded, *_ = choose(model, train, None, runs, linear)
+    assert chosen is runs[1] and selected == "restart"
+    assert bounded == [False, True]
+
+
 def test_restart_that_fits_its_training_records_worse_than_linear_is_not_chosen():
     # On the Cascaded Tanks benchmark restarts whose free run on the training
     # record was 1.2-4 times the linear model's validated up to 24 % better
