@@ -706,7 +706,9 @@ def choose(
     ratio per run, and how many standard errors the best restart validated
     better than the refinement where the two were compared (None where not).
 
-    Restarts whose free run diverges beyond the training range, or whose
+    Restarts whose free run diverges beyond the training range or goes
+    wild under excitations like the training records'
+    (:func:`bounded_beyond_range`, :func:`surrogate_bounds`), or whose
     free runs under constant inputs within it settle far out on the wrong
     side or keep swinging (:func:`excursion_ratios` above 1), are
     disqualified (unless all are), and with validation
@@ -794,8 +796,10 @@ def choose(
         + what
         + (
             f"; {len(runs) - sum(bounded)} of {len(runs)} networks diverged at "
-            f"{_AMPLITUDE_MARGIN:g} times the training amplitude or settled far "
-            "outside the training outputs under a constant input"
+            f"{_AMPLITUDE_MARGIN:g} times the training amplitude, left "
+            f"{_AMPLITUDE_MARGIN:g} times the training outputs' reach under "
+            "excitations like the training records' or settled far outside "
+            "them under a constant input"
             if not all(bounded)
             else ""
         )

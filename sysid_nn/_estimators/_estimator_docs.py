@@ -103,9 +103,12 @@ restart_losses_ : ndarray
 restart_bounded_ : ndarray of bool
     Whether each restart's free run stays bounded when the training
     excitation is scaled to twice its amplitude about its mean (within five
-    times the training outputs' largest standardised value), and passes
-    the constant-input check (``restart_excursions_`` at most 1); the
-    others are candidates only where none passes.
+    times the training outputs' largest standardised value), stays within
+    twice the larger of that value and the linear model's reach under two
+    excitations like the training records' (their Fourier phases drawn
+    anew from a fixed seed, spectrum and range kept), and passes the
+    constant-input check (``restart_excursions_`` at most 1); the others
+    are candidates only where none passes.
 restart_excursions_ : ndarray
     Each restart's constant-input check: its free runs from rest under
     constant inputs at the minimum, quartiles and maximum of the training
