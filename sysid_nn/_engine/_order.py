@@ -210,7 +210,10 @@ def short_record_cap(
     ``short_record_states``; empty where the rule does not lower it) and
     ``reason`` (one sentence). ``fitted_start``: the scores are of runs
     from fitted states (see :func:`_fitted_start_judges`), which the reason
-    says.
+    says. With ``between=False`` the limit is the one lower candidate (the
+    TDL's lags: on a two-mode chain of 1024 samples cut in motion its 4
+    lags between its limit of 3 and the evidence's 5 tested at 0.155 NRMSE
+    against 0.048, where the ISSM's 4 states tested as its 5 did).
     """
     p = est.n_outputs_
     limit = n_states
