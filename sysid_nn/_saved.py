@@ -77,9 +77,11 @@ def check_network(estimator: Any, *, ensemble: bool = False) -> None:
             "member (estimators_[k]) instead."
         )
     if kind not in _estimators().values():
-        allowed = "a TDLRegressor, an ISSMRegressor or an EnsembleRegressor"
-        if not ensemble:
-            allowed = "a TDLRegressor or an ISSMRegressor"
+        allowed = (
+            "a TDLRegressor, an ISSMRegressor or an EnsembleRegressor"
+            if ensemble
+            else "a TDLRegressor or an ISSMRegressor"
+        )
         raise TypeError(f"estimator must be {allowed}, got {kind.__name__}.")
     check_is_fitted(estimator, "estimators_" if kind is EnsembleRegressor else "coefs_")
 

@@ -90,7 +90,7 @@ AUTO_WIDTH = 7
 RELIABLE_NRMSE = 0.4
 
 
-def select_order(est, train, val, n_weights, between: bool = True) -> Bunch:
+def select_order(est, train, val, n_weights, between: bool) -> Bunch:
     """Choose the number of states from ``train``, scored on ``val``.
 
     ``est`` is the estimator being fitted (standardisation and sizes set);

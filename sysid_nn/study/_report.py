@@ -138,17 +138,24 @@ def _mode_table(
 def _non_default_params(estimator: Any) -> str:
     defaults = type(estimator)().get_params(deep=False)
     skip = {"random_state", "n_jobs", "verbose"}
-    # By repr: an ensemble's member is an estimator, equal only to itself.
     changed = {
         k: v
         for k, v in estimator.get_params(deep=False).items()
-        if k not in skip and repr(v) != repr(defaults[k])
+        if k not in skip and _differs(v, defaults[k])
     }
     # One line per table cell: a member's repr may wrap.
     return (
         ", ".join(f"{k}={' '.join(repr(v).split())}" for k, v in changed.items())
         or "defaults"
     )
+
+
+def _differs(value: Any, default: Any) -> bool:
+    """Whether a parameter differs from its default; an estimator (an
+    ensemble's member) is equal only to itself, so it is compared by repr."""
+    if hasattr(value, "get_params") or hasattr(default, "get_params"):
+        return repr(value) != repr(default)
+    return value != default
 
 
 def _versions() -> str:
