@@ -283,8 +283,8 @@ def test_issm_restarts_are_halved_too(small_subsets, monkeypatch):
     Xs, ys = _records(n=4, length=400)
     # (init="arx": on noisy records "auto" adds a restart from the subspace fit.)
     model = ISSMRegressor(
-        hidden_layer_sizes=(3,), shooting_segments=(10,), max_iter=8, n_init=2,
-        init="arx", random_state=0,
+        hidden_layer_sizes=(3,), shooting_segments=(10, 20), max_iter=8,
+        n_init=2, init="arx", random_state=0,
     )  # fmt: skip
     log = []
     _spy_stages(model, log)
