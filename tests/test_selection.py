@@ -775,11 +775,10 @@ def _first_batches_lost(monkeypatch, n_lost):
         return runs
 
     def refine_linear(*args):
-        run, losses = real_refine(*args)
+        run = real_refine(*args)
         if not n_lost:
-            return run, losses
-        lost = replace(run, loss=np.inf, val_loss=np.inf, criterion=np.inf)
-        return lost, np.full_like(losses, np.inf)
+            return run
+        return replace(run, loss=np.inf, val_loss=np.inf, criterion=np.inf)
 
     real_refine = _training.refine_linear
     monkeypatch.setattr(_training, "run_batch", run_batch)

@@ -54,10 +54,6 @@ _REFINE_SCALE = 0.1
 #: TDL's refinement still improved after 150 and 300 steps and stopped at
 #: 515 (test 2.74 / 2.31 / 2.08 mV, 17 / 35 / 64 CPU-seconds).
 _REFINE_BUDGET = 5
-#: The refinement runs from this many draws of its hidden weights and keeps
-#: the one that fits the training records best (validation has chosen each
-#: draw's weights already; on short records it cannot tell the draws apart).
-_REFINE_DRAWS = 1
 #: Where no restart fits the training records better than the linear model
 #: (see :func:`sysid_nn._engine._selection.fits_better`), this many more
 #: batches of ``n_init`` restarts run before it is returned: on the EMPS
@@ -245,9 +241,6 @@ class Training:
     #: refinement, where the two were compared (see
     #: :func:`sysid_nn._engine._selection.choose`); None where not.
     refinement_advantage: float | None = None
-    #: The training loss of each draw of the refinement (see
-    #: :func:`refine_linear`), or None without one.
-    refinement_losses: np.ndarray | None = None
     #: The indices of the runs that are closed-form fits of a linear model,
     #: untrained (see :func:`sysid_nn._engine._selection.closed_form_runs`).
     closed_form: list = field(default_factory=list)
@@ -304,13 +297,10 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         )
         closed_form = list(range(len(runs), len(runs) + len(fits)))
         runs += [run for run, _ in fits]
-    refined, refinement_losses = None, None
+    refined = None
     if linear is not None:
         refined = len(runs)
-        run, refinement_losses = refine_linear(
-            est, train_data, val, linear, refined, refine_seed
-        )
-        runs.append(run)
+        runs.append(refine_linear(est, train_data, val, linear, refined, refine_seed))
     batches = 1
     while True:
         retry = batches <= _EXTRA_BATCHES and linear is not None
@@ -350,7 +340,6 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         excursions=excursions,
         refined=refined,
         refinement_advantage=advantage,
-        refinement_losses=refinement_losses,
         closed_form=closed_form,
         validation=val,
         batches=batches,
@@ -393,23 +382,18 @@ def refine_linear(est, train_data, val, linear, k: int, seed: int) -> _Run:
     training record worse than the linear model, while this one fitted it
     better on all (test error 0.53-0.54 V against the linear model's 0.64).
     """
+    rng = np.random.RandomState(seed)
+    w = linear.w.copy()
+    drawn = np.zeros_like(w)
+    layout = est._layout()
+    layout.draw_weights(drawn, rng, est.activation)
+    for layer in layout.layers[:-1]:
+        w[layer.weights] = _REFINE_SCALE * drawn[layer.weights]
     refiner = copy.copy(est)  # its own budget, the rest shared
     refiner.max_iter = _REFINE_BUDGET * est.max_iter
     n_stages = len(refiner._stages())
-    layout = est._layout()
-    runs = []
-    for draw in range(_REFINE_DRAWS):
-        draw_seed = (seed + draw) % np.iinfo(np.int32).max
-        rng = np.random.RandomState(draw_seed)
-        w = linear.w.copy()
-        drawn = np.zeros_like(w)
-        layout.draw_weights(drawn, rng, est.activation)
-        for layer in layout.layers[:-1]:
-            w[layer.weights] = _REFINE_SCALE * drawn[layer.weights]
-        restart = _Restart(k, draw_seed, w=w, rng=rng, stage=n_stages - 1)
-        runs.append(refiner._fit_one(train_data, val, restart, n_stages)[1])
-    losses = np.array([r.loss if np.isfinite(r.criterion) else np.inf for r in runs])
-    return runs[int(np.argmin(losses))], np.array([r.loss for r in runs])
+    restart = _Restart(k, seed, w=w, rng=rng, stage=n_stages - 1)
+    return refiner._fit_one(train_data, val, restart, n_stages)[1]
 
 
 def choose_restart(

@@ -418,7 +418,6 @@ class _RecurrentRegressorBase(
         self.best_restart_ = result.chosen
         self.refined_restart_ = result.refined
         self.refinement_advantage_ = result.refinement_advantage
-        self.refinement_losses_ = result.refinement_losses
         self.closed_form_restarts_ = list(result.closed_form)
         self.selected_ = result.selected
         lin = None if result.linear is None else result.linear.run

@@ -145,11 +145,6 @@ refinement_advantage_ : float or None
     autocorrelation): the restart is kept only above 2, else the
     refinement. Infinite where a free run diverged; None where no such
     comparison was made.
-refinement_losses_ : ndarray or None
-    The training loss (as ``restart_losses_``) of each draw of the
-    refinement's small hidden weights, each draw's weights chosen by
-    validation; the draw with the lowest is ``refined_restart_``. None
-    where the linear model is no candidate.
 closed_form_restarts_ : list of int
     Indices in ``restart_scores_`` of the linear model's closed-form fits,
     judged as they are, untrained (a model without hidden layers; empty

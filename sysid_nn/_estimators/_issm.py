@@ -640,7 +640,6 @@ default=None
                 "best_restart_",
                 "refined_restart_",
                 "refinement_advantage_",
-                "refinement_losses_",
                 "best_stage_",
                 "training_history_",
                 "loss_curve_",
