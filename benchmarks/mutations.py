@@ -560,6 +560,15 @@ MUTATIONS = (
             "test_members_are_the_fits_of_their_seeds_and_held_out_shares",
         ),
     ),
+    Mutation(
+        "halving keeps the worse half",
+        "sysid_nn/_engine/_schedule.py",
+        "    return sorted(int(k) for k in ranked[: -(-len(ranked) // 2)])",
+        "    return sorted(int(k) for k in ranked[len(ranked) // 2 :])",
+        (
+            "tests/test_schedule.py::test_halving_keeps_the_restart_selected_by_validation",
+        ),
+    ),
 )
 
 
