@@ -26,7 +26,7 @@ tol : float, default=1e-8
     that small).
 n_init : int, default=4
     Random restarts; the one with the best validation (or training) loss
-    is kept. All run the first two stages, the better half the rest
+    is kept. All run the first three stages, the better half the rest
     (successive halving; see the user guide's training page).
 early_stopping : bool, default=True
     Keep, over all accepted steps of all stages, the weights with the best
