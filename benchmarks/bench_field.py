@@ -274,6 +274,8 @@ def _write_markdown(rows: list[dict]) -> None:
             f"{r['fit_s']} ({cpu} CPU, load {r.get('load') or '?'})"
         )
         units[key] = r["unit"]
+    # Columns for the models that were run (not every model of MODELS).
+    shown = [m for m in MODELS if any(m in c for c in cells.values())]
     held_out = (
         "passed as a separate validation record (`X_val`, simulated from rest)"
         if MD == SPLIT_MD
@@ -298,13 +300,13 @@ def _write_markdown(rows: list[dict]) -> None:
         "Written by `benchmarks/bench_field.py`.",
         "",
         "| benchmark | test | unit | "
-        + " | ".join(labels[m] for m in MODELS)
+        + " | ".join(labels[m] for m in shown)
         + " | best published | others |",
-        "|---|---|---|" + "---|" * len(MODELS) + "---|---|",
+        "|---|---|---|" + "---|" * len(shown) + "---|---|",
     ]
     for (benchmark, test), by_model in cells.items():
         best, others = PUBLISHED.get((benchmark, test), ("", ""))
-        values = " | ".join(by_model.get(m, "") for m in MODELS)
+        values = " | ".join(by_model.get(m, "") for m in shown)
         lines.append(
             f"| {benchmark} | {test} | {units[(benchmark, test)]} | {values} | "
             f"{best} | {others} |"
@@ -318,11 +320,11 @@ def _write_markdown(rows: list[dict]) -> None:
         "with the machine's load: on a loaded machine they can be several "
         "times the idle ones, so compare times only within one run.",
         "",
-        "| benchmark | " + " | ".join(labels[m] for m in MODELS) + " |",
-        "|---|" + "---|" * len(MODELS),
+        "| benchmark | " + " | ".join(labels[m] for m in shown) + " |",
+        "|---|" + "---|" * len(shown),
     ]
     for benchmark, by_model in fits.items():
-        values = " | ".join(str(by_model.get(m, "")) for m in MODELS)
+        values = " | ".join(str(by_model.get(m, "")) for m in shown)
         lines.append(f"| {benchmark} | {values} |")
     MD.write_text("\n".join(lines) + "\n")
 
