@@ -60,7 +60,8 @@ _REFINE_BUDGET = 5
 #: benchmark one TDL restart in four reached the basin of the fits that test
 #: at 5.3 mm (training free-run loss 0.0015 against the linear model's
 #: 0.013), and ``random_state=2`` had none of its four there (13.8 mm, the
-#: linear model).
+#: linear model; measured with the restarts halved after two stages, after
+#: three one of its four gets there).
 _EXTRA_BATCHES = 1
 
 # BLAS thread limits are process-wide: fits running in threads of one process
