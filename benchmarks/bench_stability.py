@@ -25,7 +25,14 @@ the first, 2 CPU-hours for the others). The Bouc-Wen data are generated
 once, by ``random_state=0``, for every seed of the fits.
 
 A figure quoted from this file is a median over seeds with its range, not
-one draw.
+one draw. It holds for the BLAS kernel each row records (column ``blas``):
+OpenBLAS picks its kernels by the processor, and a training path, which
+amplifies the last digit of a sum, ends elsewhere under another kernel.
+``OPENBLAS_CORETYPE=Haswell`` (set before Python starts) runs the kernel of
+the published rows on any x86-64 processor with AVX2. Rows fitted on another
+machine, written with ``--out``, are compared fit by fit with::
+
+    python benchmarks/bench_stability.py --report --against other.csv
 """
 
 from __future__ import annotations
@@ -45,7 +52,7 @@ HERE = Path(__file__).resolve().parent
 CSV = HERE / "results_stability.csv"
 FIELDS = [
     "benchmark", "model", "split", "random_state", "test", "unit", "rmse",
-    "cpu_s", "load", "warnings", "tree",
+    "cpu_s", "load", "warnings", "tree", "blas",
 ]  # fmt: skip
 
 
@@ -63,6 +70,20 @@ def _tree() -> str:
     except (OSError, subprocess.CalledProcessError):
         return "?"
     return head + ("+" if dirty else "")
+
+
+def blas_kernels() -> str:
+    """The BLAS libraries numpy and scipy run, with the kernels they picked
+    (OpenBLAS's ``architecture``, for example ``Haswell`` or ``SkylakeX``)."""
+    import scipy.linalg  # noqa: F401  (scipy's own BLAS, once loaded)
+    from threadpoolctl import threadpool_info
+
+    kinds = {
+        f"{i.get('internal_api', '?')} {i.get('architecture', '?')}"
+        for i in threadpool_info()
+        if i.get("user_api") == "blas"
+    }
+    return ", ".join(sorted(kinds)) or "?"
 
 
 def _key(row: dict) -> tuple:
@@ -122,6 +143,34 @@ def summarise(rows: list[dict]) -> list[str]:
     return lines
 
 
+def compare(rows: list[dict], other: list[dict]) -> list[str]:
+    """Fit by fit, ``other``'s rows (another machine's, say) against
+    ``rows``: per benchmark, test and model, how many of the fits both hold
+    are identical (to 1e-9 relative), and both ranges over those fits."""
+    mine = {(*_key(r), r["test"]): float(r["rmse"]) for r in rows}
+    groups: dict[tuple, list[tuple]] = {}
+    for r in other:
+        k = (*_key(r), r["test"])
+        if k in mine:
+            groups.setdefault((r["benchmark"], r["test"], r["model"]), []).append(
+                (mine[k], float(r["rmse"]), r.get("blas") or "not recorded")
+            )
+    lines = [
+        "| benchmark | test | model | fits | identical | range here | range there "
+        "| kernels there |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for (benchmark, test, model), pairs in groups.items():
+        a, b, kinds = (np.array(v) for v in zip(*pairs, strict=True))
+        same = int(np.sum(np.isclose(a, b, rtol=1e-9, atol=0.0)))
+        lines.append(
+            f"| {benchmark} | {test} | {MODELS[model][0]} | {len(a)} | {same} | "
+            f"{a.min():.4g} - {a.max():.4g} | {b.min():.4g} - {b.max():.4g} | "
+            f"{', '.join(sorted(set(kinds)))} |"
+        )
+    return lines
+
+
 def write_report(path: Path, rows: list[dict]) -> str:
     splits = sorted({r["split"] for r in rows})
     seeds = sorted({int(r["random_state"]) for r in rows})
@@ -139,8 +188,8 @@ def write_report(path: Path, rows: list[dict]) -> str:
             "of the linear model's. CPU time of one fit on one core "
             f"({platform.machine()}, {os.cpu_count()} cores shared with other "
             f"jobs, 1-minute load {min(loads, default=0):.1f}-"
-            f"{max(loads, default=0):.1f}). Written by "
-            "`benchmarks/bench_stability.py`.",
+            f"{max(loads, default=0):.1f}). BLAS kernels: "
+            f"{_kernels(rows)}. Written by `benchmarks/bench_stability.py`.",
             "",
             *summarise(rows),
             "",
@@ -148,6 +197,15 @@ def write_report(path: Path, rows: list[dict]) -> str:
     )
     path.with_suffix(".md").write_text(text)
     return text
+
+
+def _kernels(rows: list[dict]) -> str:
+    """The kernels the rows record, with how many rows ran on each."""
+    counts: dict[str, int] = {}
+    for r in rows:
+        kind = r.get("blas") or "not recorded"
+        counts[kind] = counts.get(kind, 0) + 1
+    return "; ".join(f"{k} ({n} rows)" for k, n in sorted(counts.items()))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -163,6 +221,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--data-home", default=None, help="data directory")
     parser.add_argument("--out", default=str(CSV), help="results CSV")
     parser.add_argument("--report", action="store_true", help="only summarise")
+    parser.add_argument(
+        "--against",
+        default=None,
+        help="another results CSV (another machine's) to compare fit by fit",
+    )
     args = parser.parse_args(argv)
     out = Path(args.out)
     benchmarks = [b for b in args.only.split(",") if b]
@@ -170,8 +233,11 @@ def main(argv: list[str] | None = None) -> None:
     unknown = set(benchmarks) - set(BENCHMARKS) | set(models) - set(MODELS)
     if unknown:
         parser.error(f"unknown benchmark or model: {', '.join(sorted(unknown))}")
+    if args.against:
+        print("\n".join(compare(read_rows(out), read_rows(Path(args.against)))))
+        return
     if not args.report:
-        tree = _tree()
+        tree, blas = _tree(), blas_kernels()
         seeds = [int(s) for s in args.seeds.split(",")]
         shifts = [int(s) for s in args.shifts.split(",")]
         for benchmark in benchmarks:
@@ -195,6 +261,7 @@ def main(argv: list[str] | None = None) -> None:
                                 "split": split,
                                 "random_state": seed,
                                 "tree": tree,
+                                "blas": blas,
                             }
                             for r in fitted
                         ]
