@@ -48,6 +48,8 @@ import numpy as np
 from _results import read_rows
 from bench_field import BENCHMARKS, DEFAULT_MODELS, MODELS, run_one
 
+from sysid_nn.study._report import blas_kernels
+
 HERE = Path(__file__).resolve().parent
 CSV = HERE / "results_stability.csv"
 FIELDS = [
@@ -70,20 +72,6 @@ def _tree() -> str:
     except (OSError, subprocess.CalledProcessError):
         return "?"
     return head + ("+" if dirty else "")
-
-
-def blas_kernels() -> str:
-    """The BLAS libraries numpy and scipy run, with the kernels they picked
-    (OpenBLAS's ``architecture``, for example ``Haswell`` or ``SkylakeX``)."""
-    import scipy.linalg  # noqa: F401  (scipy's own BLAS, once loaded)
-    from threadpoolctl import threadpool_info
-
-    kinds = {
-        f"{i.get('internal_api', '?')} {i.get('architecture', '?')}"
-        for i in threadpool_info()
-        if i.get("user_api") == "blas"
-    }
-    return ", ".join(sorted(kinds)) or "?"
 
 
 def _key(row: dict) -> tuple:

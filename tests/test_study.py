@@ -110,6 +110,23 @@ def test_report_sections_and_setup(study):
         assert f"| {label} |" in report
 
 
+def test_report_names_the_blas_kernels_its_figures_ran_on(study):
+    # Figures are reproduced only under the same BLAS kernel: the report's
+    # machine line names the ones this process runs.
+    import scipy.linalg  # noqa: F401  (scipy's own BLAS)
+    from threadpoolctl import threadpool_info
+
+    report = (study.out_dir / "report.md").read_text()
+    machine = next(line for line in report.splitlines() if "Machine:" in line)
+    kinds = [
+        f"{info['internal_api']} {info.get('architecture', '?')}"
+        for info in threadpool_info()
+        if info.get("user_api") == "blas"
+    ]
+    assert kinds
+    assert all(kind in machine for kind in kinds)
+
+
 def test_summary_reuses_eq_19_20_statistics(study):
     ev, summary = study.evaluation, study.summary
     row = summary.query("model == 'issm' and mode == 'simulation'").iloc[0]

@@ -168,10 +168,31 @@ def _versions() -> str:
     return ", ".join(found)
 
 
+def blas_kernels() -> str:
+    """The BLAS libraries numpy and scipy run, with the kernels they picked.
+
+    OpenBLAS picks its kernels by the processor (its ``architecture``, for
+    example ``Haswell`` or ``SkylakeX``), and sums in another order under
+    another kernel: a training path carries that last digit to another end
+    point, so figures are reproduced only under the same kernel
+    (``OPENBLAS_CORETYPE`` set before Python starts chooses it).
+    """
+    import scipy.linalg  # noqa: F401  (loads scipy's own BLAS)
+    from threadpoolctl import threadpool_info
+
+    kinds = {
+        f"{info.get('internal_api', '?')} {info.get('architecture', '?')}"
+        for info in threadpool_info()
+        if info.get("user_api") == "blas"
+    }
+    return ", ".join(sorted(kinds)) or "none found"
+
+
 def _machine() -> str:
     return (
         f"{platform.platform()}, Python {platform.python_version()}, "
-        f"{os.cpu_count()} logical CPUs ({platform.machine()})"
+        f"{os.cpu_count()} logical CPUs ({platform.machine()}), BLAS "
+        f"{blas_kernels()}"
     )
 
 
