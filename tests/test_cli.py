@@ -240,6 +240,51 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
     assert type(load_model(model)) is type(est)
 
 
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_fit_members_saves_the_median_of_their_fits(records, tmp_path, capsys):
+    from sysid_nn import EnsembleRegressor, TDLRegressor, load_model
+
+    (a, b), many = records
+    model = tmp_path / "ensemble.sysid"
+    argv = ["fit", str(a), "--input", "force", "--output", "displacement"]
+    argv += ["--hidden", "3", *TINY_FIT, "--members", "3", "--seed", "4"]
+    assert main([*argv, "--save", str(model)]) == 0
+    out = capsys.readouterr().out
+    assert "fitted median of 3 × TDL" in out
+    assert "each member's own last 15%-25% of" in out
+    loaded = load_model(model)
+    label = _read_bundle(model).model.label
+    assert (
+        type(loaded) is EnsembleRegressor
+        and label == "median of 3 × TDL (hidden_layer_sizes=(3,), n_init=1, max_iter=5)"
+    )
+    # The members a user would get from EnsembleRegressor in Python: their
+    # seeds drawn from --seed, each holding out its own share of the record.
+    assert loaded.member_validation_fractions_ == [0.15, 0.2, 0.25]
+    net = TDLRegressor(hidden_layer_sizes=(3,), n_init=1, max_iter=5, verbose=0)
+    frame = pd.read_csv(a)
+    X, y = frame[["force"]].to_numpy(), frame["displacement"].to_numpy()
+    same = EnsembleRegressor(net, n_members=3, random_state=4).fit(X, y)
+    assert loaded.member_random_states_ == same.member_random_states_
+    np.testing.assert_allclose(loaded.simulate(X), same.simulate(X), rtol=1e-10)
+    # With validation records every member validates on them.
+    other = tmp_path / "with_val.sysid"
+    argv = ["fit", str(a), "--val", str(b), "--input", "force", "--output"]
+    argv += ["displacement", "--hidden", "3", *TINY_FIT, "--members", "2"]
+    assert main([*argv, "--save", str(other), "--quiet"]) == 0
+    assert load_model(other).member_validation_fractions_ == [None, None]
+    # `validate` scores the median, as saved.
+    report = tmp_path / "validation"
+    argv = ["validate", "--model", str(model), str(many), "--split-by", "realization"]
+    assert main([*argv, "--out", str(report), "--max-lag", "10", "--quiet"]) == 0
+    summary = pd.read_csv(report / "summary.csv")
+    assert set(summary["model"]) == {label}
+    # Modes belong to one network: the median has none, and says so.
+    capsys.readouterr()
+    assert main(["modal", str(model)]) == 1
+    assert "median of 3 networks" in _one_error_line(capsys)
+
+
 def test_fit_with_validation_files(records, tmp_path, capsys):
     (a, b), _ = records
     model = tmp_path / "model.sysid"

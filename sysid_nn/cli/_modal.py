@@ -96,6 +96,14 @@ def _run_modal(args: argparse.Namespace) -> int:
             "--dt out."
         )
     model = bundle.model
+    members = getattr(model.estimator, "estimators_", None)
+    if members is not None:
+        raise _InputError(
+            f"{args.model} holds the median of {len(members)} networks (saved by "
+            "`sysid-nn fit --members`), which is not one network and has no "
+            "modes of its own; read a member's in Python: "
+            "sysid_nn.modal_parameters(sysid_nn.load_model(path).estimators_[k], dt)."
+        )
     modes = modal_parameters(model.estimator, dt, level=args.level)
     print(f"Modes of {args.model} (dt = {dt:g} s), linearised at rest:")
     print(modal_table(modes, tuple(model.outputs), show_all=args.all))
