@@ -239,7 +239,8 @@ def _run_fit(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         _fit(fitted, X_fit, y_fit, X_val, y_val, sources, inputs, outputs)
-        # What holds for every member: its weights and validation, its time.
+        # A network of the fit (an ensemble's first member) for the checks
+        # that hold for each.
         networks = getattr(fitted, "estimators_", [fitted])
         estimator = networks[0]
         _check_enough_samples(estimator, X_fit, args.files)
