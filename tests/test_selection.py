@@ -321,7 +321,9 @@ def test_the_choice_among_restarts_is_explained_by_fitted_attributes(monkeypatch
 def test_refinement_comparison_is_a_fitted_attribute_that_decides(monkeypatch):
     # The restart that validates best is ahead of the refinement of the
     # linear model by a reported number of standard errors; the choice
-    # follows it: with the threshold just above it the refinement is kept.
+    # follows it: with the threshold just below it the restart is kept,
+    # just above it the refinement. (How far ahead depends on the path,
+    # which the BLAS kernel moves: 1.7 on one machine, above 2 on another.)
     from sysid_nn._engine import _selection
 
     (X, y, _), (Xv, yv, _) = (_linear_record(s) for s in (0, 1))
@@ -329,14 +331,16 @@ def test_refinement_comparison_is_a_fitted_attribute_that_decides(monkeypatch):
     params = dict(n_init=3, max_iter=30, random_state=0)
     net = TDLRegressor(**params).fit(X, y, X_val=Xv, y_val=yv)
     ahead = net.refinement_advantage_
-    assert ahead > _selection._SIGNIFICANT
-    assert net.best_restart_ not in (None, net.refined_restart_)
+    assert ahead is not None and 0 < ahead < np.inf
     assert (net.selected_, net.best_restart_) == _replayed_choice(net)
-    monkeypatch.setattr(_selection, "_SIGNIFICANT", ahead + 1e-9)
-    held = TDLRegressor(**params).fit(X, y, X_val=Xv, y_val=yv)
-    assert held.refinement_advantage_ == ahead
-    assert held.best_restart_ == held.refined_restart_
-    assert (held.selected_, held.best_restart_) == _replayed_choice(held, ahead + 1e-9)
+    for margin, keeps_restart in ((-1e-9, True), (1e-9, False)):
+        monkeypatch.setattr(_selection, "_SIGNIFICANT", ahead + margin)
+        again = TDLRegressor(**params).fit(X, y, X_val=Xv, y_val=yv)
+        assert again.refinement_advantage_ == ahead
+        assert (again.best_restart_ != again.refined_restart_) is keeps_restart
+        assert again.best_restart_ is not None
+        replayed = _replayed_choice(again, ahead + margin)
+        assert (again.selected_, again.best_restart_) == replayed
     # No comparison without validation records.
     alone = TDLRegressor(early_stopping=False, **params).fit(X, y)
     assert alone.refinement_advantage_ is None
