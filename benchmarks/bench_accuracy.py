@@ -57,6 +57,7 @@ import _protocol as P  # noqa: E402
 
 from sysid_nn import ISSMRegressor, TDLRegressor  # noqa: E402
 from sysid_nn.study import PAPER_ISSM, PAPER_TDL  # noqa: E402
+from sysid_nn.study._report import blas_kernels  # noqa: E402
 
 DEFAULT_SEED = 2024
 ROBUSTNESS_SEEDS = (2025, 2026)
@@ -443,7 +444,7 @@ def machine_info() -> list[str]:
         f"- {source_version()}",
         f"- {platform.platform()}, {platform.processor() or platform.machine()}, "
         f"{os.cpu_count()} CPUs (shared with other work: times are noisy, "
-        "compare ratios within one run)",
+        f"compare ratios within one run), BLAS {blas_kernels()}",
     ]
 
 

@@ -58,6 +58,7 @@ from bench_field import BENCHMARKS, _fit
 from bench_linear import N_TEST, chain
 
 from sysid_nn import ISSMRegressor, TDLRegressor
+from sysid_nn.study._report import blas_kernels
 
 MODELS = {"TDLRegressor()": TDLRegressor, "ISSMRegressor()": ISSMRegressor}
 SYSTEMS = ("cascaded_tanks", "emps", "chains", "oscillator")
@@ -187,7 +188,8 @@ def report(constant: str, values, rows, wall: float) -> str:
         "",
         f"Command: `python benchmarks/bench_constants.py {constant} "
         f"{','.join(values)}` (wall time {wall / 60:.1f} min; 1-minute load "
-        f"{P.load_range(rows)} on 2 cores). Median (range) of test errors "
+        f"{P.load_range(rows)} on 2 cores; BLAS {blas_kernels()}). Median "
+        "(range) of test errors "
         "over the cases and seeds; `R` / `L`: fits that returned the "
         "refinement / the linear model; `same`: fits identical to the first "
         "value's; CPU-s: median CPU time of a fit on one core.",

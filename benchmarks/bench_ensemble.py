@@ -41,6 +41,7 @@ import _protocol as P
 from bench_constants import cases, fit_scored
 
 from sysid_nn import EnsembleRegressor, ISSMRegressor, TDLRegressor
+from sysid_nn.study._report import blas_kernels
 
 HERE = Path(__file__).resolve().parent
 OUT = HERE / "results_ensemble.md"
@@ -70,7 +71,7 @@ def main(argv=None) -> None:
     lines = [
         f"Command: `python benchmarks/bench_ensemble.py --only {args.only} "
         f"--seeds {args.seeds}`; {platform.machine()}, {os.cpu_count()} cores "
-        "shared with other jobs.",
+        f"shared with other jobs, BLAS {blas_kernels()}.",
         "",
         "| system | case | network | single: median (range), spread | "
         "ensemble: median (range), spread | single, median per share "

@@ -53,6 +53,7 @@ from sklearn.model_selection import GridSearchCV, KFold
 
 from sysid_nn import ISSMRegressor, TDLRegressor, datasets
 from sysid_nn.metrics import make_simulation_scorer
+from sysid_nn.study._report import blas_kernels
 
 HERE = Path(__file__).resolve().parent
 CSV = HERE / "results_field.csv"
@@ -316,7 +317,8 @@ def _write_markdown(rows: list[dict]) -> None:
         f"Fit times in seconds of wall time (of CPU time, and the 1-minute load "
         f"average at the end of the fit; {platform.machine()}, Python "
         f"{platform.python_version()}, {os.cpu_count()} cores shared with other "
-        "jobs; fits run with the estimators' default single job). The times grow "
+        f"jobs, BLAS {blas_kernels()}; fits run with the estimators' default single "
+        "job). The times grow "
         "with the machine's load: on a loaded machine they can be several "
         "times the idle ones, so compare times only within one run.",
         "",
