@@ -79,15 +79,26 @@ print(f"fitted in {model.fit_time_:.1f} s")
 # one-step prediction; the innovations are what it leaves. ``simulate(X)``
 # keeps :math:`\mathbf{E} = \mathbf{0}`, as in the paper's section 4.4. Both
 # return displacement and velocity.
-x_j, y_j = X_test[0], y_test[0]
-y_pred = model.predict(x_j, y_j)
-innovations = y_j - y_pred
-y_sim = model.simulate(x_j)
 y_pred_test = model.predict(X_test, y_test)
 y_sim_test = model.simulate(X_test)
+# A model chosen by its free run can have an unstable one-step predictor
+# (the pitfalls page): where its filter diverges on a record, the
+# predictions are NaN from there on, and the record is left out of the
+# one-step scores and of the state analysis below.
+filtered = [bool(np.isfinite(v).all()) for v in y_pred_test]
+for j in np.flatnonzero(np.logical_not(filtered)):
+    print(f"test record {j}: the one-step predictor diverged")
+j0 = filtered.index(True)  # the record the figures show
+x_j, y_j = X_test[j0], y_test[j0]
+y_pred = y_pred_test[j0]
+innovations = y_j - y_pred
+y_sim = y_sim_test[j0]
 for k, name in enumerate(("displacement", "velocity")):
     measured = [v[:, k] for v in y_test]
-    one_step = nrmse(measured, [v[:, k] for v in y_pred_test])
+    one_step = nrmse(
+        [m for m, ok in zip(measured, filtered, strict=True) if ok],
+        [v[:, k] for v, ok in zip(y_pred_test, filtered, strict=True) if ok],
+    )
     free_run = nrmse(measured, [v[:, k] for v in y_sim_test])
     print(f"{name:12s} NRMSE: one-step {one_step:.1e}, free run {free_run:.3f}")
 
@@ -134,6 +145,8 @@ def r2_of_fit(columns, target):
 
 
 for j, st in enumerate(states):
+    if not filtered[j]:
+        continue  # the filter diverged on this record
     z = rec.hysteretic[3 + j]
     measured, hidden = st.states[:, :2], st.states[:, 2:]
     r2_xv, _ = r2_of_fit(measured.T, z)
@@ -151,8 +164,8 @@ for j, st in enumerate(states):
 # hysteresis without ever seeing :math:`Z`. The figure shows :math:`Z` and
 # its reconstruction from all states on the first test record, in
 # time and against the displacement (the hysteresis loop).
-z = rec.hysteretic[3]
-_, z_hat = r2_of_fit(states[0].states.T, z)
+z = rec.hysteretic[3 + j0]
+_, z_hat = r2_of_fit(states[j0].states.T, z)
 fig, (ax_t, ax_h) = plt.subplots(1, 2, figsize=(10, 3.8))
 ax_t.plot(rec.t, z, "k-", linewidth=1, label="true Z")
 ax_t.plot(rec.t, z_hat, "--", linewidth=1, label="from the states")
@@ -160,7 +173,7 @@ ax_t.set_xlabel("time t [s]")
 ax_t.set_ylabel("hysteretic component Z [m]")
 ax_t.legend()
 plot_hysteresis(
-    y_test[0][:, 0],
+    y_test[j0][:, 0],
     z,
     label="true Z",
     models={"from the states": z_hat},
@@ -183,7 +196,7 @@ fig.tight_layout()
 # states per unit of the innovations: the measured states in metres and
 # metres per second, the hidden one in internal units, so only the gains
 # into the same state compare directly.
-st = states[0]
+st = states[j0]
 H = np.eye(model.n_outputs_, model.n_states_)
 radius_phi = np.abs(np.linalg.eigvals(st.Phi)).max(axis=1)
 radius_pred = np.abs(np.linalg.eigvals(st.Phi - st.K @ H)).max(axis=1)
@@ -252,14 +265,19 @@ for name, m in models_x.items():
     m.fit(X_train, y_x[:2], X_val=X_val, y_val=y_x[2:3])
     free = nrmse(y_x[3:], m.simulate(X_test))
     one = nrmse(y_x[3:], m.predict(X_test, y_x[3:]))
+    one_text = f"{one:.1e}" if np.isfinite(one) else "diverged on a test record"
     print(
         f"{name}: {m.n_states_} states, free run NRMSE {free:.3f}, "
-        f"one-step {one:.1e}, predictor radius {m.predictor_spectral_radius_:.3f}"
+        f"one-step {one_text}, predictor radius "
+        f"{m.predictor_spectral_radius_:.3f}"
     )
 
 # %%
-# In this short-budget run, too, the TDL start gives the better free run. Its
-# innovation gain stays at the TDL's own one-step predictor (predictor radius
+# In this short-budget run of one restart the linear start gives the
+# slightly better free run, but a one-step predictor that diverges on a test
+# record; over the accuracy benchmark's seeds the TDL start is the better
+# one on clean records. The TDL start's innovation gain stays at the TDL's
+# own one-step predictor (predictor radius
 # 0: the measured output takes the place of every lag): on clean records the
 # refit finds nothing better within its margin. The model keeps the network
 # it started from in ``tdl_``; its free run is that network's, to rounding:
