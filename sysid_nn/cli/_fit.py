@@ -239,16 +239,14 @@ def _run_fit(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         _fit(fitted, X_fit, y_fit, X_val, y_val, sources, inputs, outputs)
-        # A network of the fit (an ensemble's first member) for the checks
-        # that hold for each.
+        # The fitted networks; the first stands for all in the checks that
+        # hold for each (an ensemble's members share structure and records).
         networks = getattr(fitted, "estimators_", [fitted])
-        estimator = networks[0]
-        _check_enough_samples(estimator, X_fit, args.files)
+        network, ensemble = networks[0], len(networks) > 1
+        _check_enough_samples(network, X_fit, args.files)
         # Each member held out its own share: no part was held out of all.
         own_shares = (
-            fitted is not estimator
-            and X_val is None
-            and estimator.best_validation_score_ is not None
+            ensemble and X_val is None and network.best_validation_score_ is not None
         )
         if X_val is not None:
             scores = _scores(fitted, X_val, y_val)
@@ -260,26 +258,24 @@ def _run_fit(args: argparse.Namespace) -> int:
                 f"each member's own last {shares[0]:.0%}-{shares[-1]:.0%} of "
                 f"{records.origins[0]}"
             )
-        elif estimator.best_validation_score_ is not None:
-            share = estimator.get_params()["validation_fraction"]
-            scores = _scores(estimator, X, y, tail=share)
+        elif network.best_validation_score_ is not None:
+            share = network.get_params()["validation_fraction"]
+            scores = _scores(network, X, y, tail=share)
             where = (
                 f"the last {share:.0%} of {records.origins[0]} (free run from the "
                 "record's start)"
             )
         else:  # too short to hold anything out: say so, score what there is
-            scores = _scores(estimator, X, y)
+            scores = _scores(network, X, y)
             where = "nothing (the record is too short to hold a part out)"
     # One line per distinct warning, not Python's two-line source excerpt.
     messages = [str(w.message).splitlines()[0] for w in caught]
     # On a chaotic record free-run scores mean little: say so (longest record).
     longest = max(X_fit, key=len)
-    messages.append(chaos_hint(estimator, longest))
+    messages.append(chaos_hint(network, longest))
     for message in dict.fromkeys(m for m in messages if m):
         print(f"{_PROG}: warning: {message}", file=sys.stderr)
-    what = model.label
-    if fitted is not estimator:
-        what = f"median of {len(networks)} × {model.label}"
+    what = f"median of {len(networks)} × {model.label}" if ensemble else model.label
     info = {
         "inputs": list(inputs),
         "outputs": list(outputs),
@@ -304,7 +300,7 @@ def _run_fit(args: argparse.Namespace) -> int:
             if own_shares
             else "Scores on the validation data that chose the weights (optimistic; "
             "`sysid-nn validate` on unseen records tells more):"
-            if estimator.best_validation_score_ is not None
+            if network.best_validation_score_ is not None
             else "Scores on the training data:"
         )
     )
