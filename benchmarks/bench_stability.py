@@ -42,6 +42,7 @@ import csv
 import os
 import platform
 import subprocess
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -189,10 +190,7 @@ def write_report(path: Path, rows: list[dict]) -> str:
 
 def _kernels(rows: list[dict]) -> str:
     """The kernels the rows record, with how many rows ran on each."""
-    counts: dict[str, int] = {}
-    for r in rows:
-        kind = r.get("blas") or "not recorded"
-        counts[kind] = counts.get(kind, 0) + 1
+    counts = Counter(r.get("blas") or "not recorded" for r in rows)
     return "; ".join(f"{k} ({n} rows)" for k, n in sorted(counts.items()))
 
 
