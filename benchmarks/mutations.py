@@ -561,6 +561,13 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "fit --members ignores --seed",
+        "sysid_nn/cli/_fit.py",
+        "    return EnsembleRegressor(estimator, n_members=members, random_state=seed)",
+        "    return EnsembleRegressor(estimator, n_members=members)",
+        ("tests/test_cli.py::test_fit_members_saves_the_median_of_their_fits",),
+    ),
+    Mutation(
         "halving keeps the worse half",
         "sysid_nn/_engine/_schedule.py",
         "    return sorted(int(k) for k in ranked[: -(-len(ranked) // 2)])",
