@@ -561,6 +561,16 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "linear model trained on validation judged from rest",
+        "sysid_nn/_engine/_selection.py",
+        "        (lin._fit_one(train, judged, new_restart(k), n_stages)[1], k)",
+        "        (lin._fit_one(train, val, new_restart(k), n_stages)[1], k)",
+        (
+            "tests/test_policy.py::"
+            "test_linear_candidate_trains_validated_as_the_networks_will_be",
+        ),
+    ),
+    Mutation(
         "fit --members ignores --seed",
         "sysid_nn/cli/_fit.py",
         "    return EnsembleRegressor(estimator, n_members=members, random_state=seed)",
