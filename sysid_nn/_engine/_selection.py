@@ -210,23 +210,21 @@ def linear_candidate(est, train, val, new_restart) -> LinearCandidate | None:
     lin = _linear_copy(est)
     lin._prepare_structure(train, val)
     n_stages = len(lin._stages())
+    closed_fits = lin._closed_form_fits(for_network=True)
     judged = val
-    closed_start = lin._closed_form_fits(for_network=True)
-    if val is not None and closed_start:
+    if val is not None and closed_fits:
         # Its training validated as the networks' will be, judged from its
         # closed-form fit: judged from rest before the burn-in is known, the
         # TDL's early stop on the Cascaded Tanks benchmark fell on a dip of
         # a run from the wrong start that the BLAS kernel moved (the split
         # ten samples later: networks 0.68-1.58 V, 0.82-1.89 V under
         # another kernel; judged so, 0.56-0.71 V under both).
-        judged = judged_records(
-            val, *judgement(est, lin, closed_start[0][1], train, val)[:3]
-        )
+        judged = judged_from(est, lin, closed_fits[0][1], train, val)
     fits = [
         (lin._fit_one(train, judged, new_restart(k), n_stages)[1], k)
         for k in lin._linear_start_restarts()
     ]
-    closed = closed_form_runs(lin, train, judged, new_restart, for_network=True)
+    closed = closed_form_runs(lin, train, judged, new_restart, closed_fits)
     fits += closed
     if val is not None and closed:
         # As a network must fit its training records no worse than the
@@ -266,6 +264,13 @@ def judged_records(val, burn: int, start_window: int, whole=None):
     )
 
 
+def judged_from(est, lin, w: np.ndarray, train, val):
+    """``val`` as :func:`judgement` judges it from the linear model ``lin``
+    with weights ``w`` (see :func:`judged_records`)."""
+    burn, window, whole, _ = judgement(est, lin, w, train, val)
+    return judged_records(val, burn, window, whole)
+
+
 def fitting_no_worse(runs: list, loss: float) -> list:
     """The runs whose training loss is no worse than ``loss`` (within a tie).
 
@@ -292,8 +297,9 @@ def fits_better(runs: list, bounded: list, linear: LinearCandidate) -> bool:
     return any(ok and r.loss < loss - tie for r, ok in zip(runs, bounded, strict=True))
 
 
-def closed_form_runs(lin, train, val, new_restart, *, for_network: bool) -> list:
-    """The closed-form fits of the linear model ``lin`` as they are.
+def closed_form_runs(lin, train, val, new_restart, fits: list) -> list:
+    """The closed-form fits ``fits`` of the linear model ``lin`` as they are
+    (its ``_closed_form_fits``: ``(k, w)`` pairs).
 
     Returns ``(run, k)`` pairs: the run of a fresh restart
     ``new_restart(k)`` started at the fit and given no stage to run (judged
@@ -304,11 +310,11 @@ def closed_form_runs(lin, train, val, new_restart, *, for_network: bool) -> list
     (a flexible arm's acceleration, 768 samples: test NRMSE 0.62 from the
     low-passed start, 0.067 for the fit to the measured record); the
     ISSM's are its linear starts as they are, where ``lin`` is fitted as
-    itself, not as a network's linear candidate (``for_network``).
+    itself, not as a network's linear candidate.
     """
     n_stages = len(lin._stages())
     runs = []
-    for k, w in lin._closed_form_fits(for_network=for_network):
+    for k, w in fits:
         restart = new_restart(k)
         restart.w, restart.stage = w, n_stages
         runs.append((lin._fit_one(train, val, restart, n_stages)[1], k))

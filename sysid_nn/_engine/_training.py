@@ -287,14 +287,13 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     elif val is not None and not est._hidden_layers():
         # A linear model is judged as the networks are, from its own start.
         w0 = est._initial_params(np.random.RandomState(0))
-        burn, window, whole, _ = _selection.judgement(est, est, w0, train_data, val)
-        val = _selection.judged_records(val, burn, window, whole)
+        val = _selection.judged_from(est, est, w0, train_data, val)
     runs = run_batch(est, train_data, val, seeds, halving)
     closed_form = []
     if not est._hidden_layers():
         # A linear model: its closed-form fits are candidates as they are.
         fits = _selection.closed_form_runs(
-            est, train_data, val, new_restart, for_network=False
+            est, train_data, val, new_restart, est._closed_form_fits(for_network=False)
         )
         closed_form = list(range(len(runs), len(runs) + len(fits)))
         runs += [run for run, _ in fits]
