@@ -18,7 +18,13 @@ seed (the draws a user of one fit gets) and over the ensembles, the single
 fits' median per share, and the median CPU time of a fit. Run::
 
     python benchmarks/bench_ensemble.py [--only cascaded_tanks,emps]
-        [--seeds 0,1,2,3,4] [--data-home DIR] [--out FILE]
+        [--seeds 0,1,2,3,4] [--shifts 0] [--data-home DIR] [--out FILE]
+
+``--shifts -10,10,25`` also fits, on the field benchmarks, the ensembles
+whose members' held-out parts start that many samples later than the
+shares put them (the ensemble's own splits moved, as ``bench_stability``
+moves a single fit's), and reports every ensemble of the five splits
+together; the single fits under moved splits are ``bench_stability``'s.
 
 (the defaults: about 40 CPU-minutes; ``results_ensemble.md`` also holds
 ``--only chains,oscillator --seeds 0,1,2``).
@@ -39,6 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _protocol as P
 from bench_constants import cases, fit_scored
+from bench_field import BENCHMARKS
 
 from sysid_nn import EnsembleRegressor, ISSMRegressor, TDLRegressor
 from sysid_nn.study._report import blas_kernels
@@ -59,27 +66,42 @@ def _range(values) -> str:
     return f"{P.median_range(v, 4)}, {v.max() / v.min():.2f}"
 
 
+def moved(n_train, shift: int) -> tuple:
+    """The ensemble's held-out shares of a record of ``n_train`` samples,
+    each part starting ``shift`` samples later (the shares unmoved without
+    a record length)."""
+    if not n_train or not shift:
+        return FRACTIONS
+    return tuple((round(f * n_train) - shift) / n_train for f in FRACTIONS)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--only", default="cascaded_tanks,emps")
     parser.add_argument("--seeds", default="0,1,2,3,4")
+    parser.add_argument("--shifts", default="0", help="held-out starts moved")
     parser.add_argument("--data-home", default=None, help="data directory")
     parser.add_argument("--out", default=str(OUT), help="report file (markdown)")
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
+    shifts = sorted({0, *(int(s) for s in args.shifts.split(","))})
     started, loads = time.time(), [os.getloadavg()[0]]
     lines = [
         f"Command: `python benchmarks/bench_ensemble.py --only {args.only} "
-        f"--seeds {args.seeds}`; {platform.machine()}, {os.cpu_count()} cores "
-        f"shared with other jobs, BLAS {blas_kernels()}.",
+        f"--seeds {args.seeds} --shifts {args.shifts}`; {platform.machine()}, "
+        f"{os.cpu_count()} cores shared with other jobs, BLAS {blas_kernels()}.",
         "",
         "| system | case | network | single: median (range), spread | "
         "ensemble: median (range), spread | single, median per share "
         f"{' / '.join(map(str, FRACTIONS))} | CPU-s single / ensemble |",
         "|---|---|---|---|---|---|---|",
     ]
+    moved_lines: list[str] = []
     for system in [s for s in args.only.split(",") if s]:
         shares = (None,) if system in WITH_X_VAL else FRACTIONS
+        n_train = None
+        if system in BENCHMARKS:
+            n_train = len(BENCHMARKS[system][0](data_home=args.data_home).y_train[0])
         for label, fit, score in cases(system, args.data_home):
             if label.startswith("split"):
                 continue  # the field records' default protocol only
@@ -91,6 +113,7 @@ def main(argv=None) -> None:
                     [],
                     [],
                 )
+                moved_ensembles: dict = {}
                 for seed in seeds:
                     for share in shares:
                         extra = {} if share is None else {"validation_fraction": share}
@@ -100,20 +123,50 @@ def main(argv=None) -> None:
                         single.append(test)
                         per_share.setdefault(share, []).append(test)
                         cpu_single.append(cpu)
-                    _, test, cpu = fit_scored(
-                        fit, score, EnsembleRegressor(network(), random_state=seed)
-                    )
-                    ensemble.append(test)
-                    cpu_ensemble.append(cpu)
+                    for shift in shifts if n_train else (0,):
+                        _, test, cpu = fit_scored(
+                            fit,
+                            score,
+                            EnsembleRegressor(
+                                network(),
+                                validation_fractions=moved(n_train, shift),
+                                random_state=seed,
+                            ),
+                        )
+                        moved_ensembles.setdefault(shift, []).append(test)
+                        cpu_ensemble.append(cpu)
                     loads.append(os.getloadavg()[0])
                     print(system, label, name, seed, single[-len(shares) :],
                           test, flush=True)  # fmt: skip
                 medians = " / ".join(f"{np.median(v):.4g}" for v in per_share.values())
+                ensemble = moved_ensembles.get(0, [])
+                if len(moved_ensembles) > 1:
+                    every = np.concatenate(list(moved_ensembles.values()))
+                    moved_lines.append(
+                        f"| {system} | {label} | {name} | "
+                        + " | ".join(
+                            _range(moved_ensembles[k]) for k in sorted(moved_ensembles)
+                        )
+                        + f" | {_range(every)} |"
+                    )
                 lines.append(
                     f"| {system} | {label} | {name} | {_range(single)} | "
                     f"{_range(ensemble)} | {medians} | "
                     f"{np.median(cpu_single):.1f} / {np.median(cpu_ensemble):.1f} |"
                 )
+    if moved_lines:
+        lines += [
+            "",
+            "Ensembles whose members' held-out parts start "
+            + ", ".join(map(str, sorted(shifts)))
+            + " samples later than the shares put them:",
+            "",
+            "| system | case | network | "
+            + " | ".join(f"{k:+d}" for k in sorted(shifts))
+            + " | all |",
+            "|---" * (4 + len(shifts)) + "|",
+            *moved_lines,
+        ]
     lines += [
         "",
         f"Wall time {(time.time() - started) / 60:.0f} min; 1-minute load "
