@@ -95,6 +95,25 @@ MODELS = {
 #: The models a run fits unless told (the published tables' columns).
 DEFAULT_MODELS = ("tdl", "issm", "linear")
 
+
+def model_variant(name: str) -> bool:
+    """Register ``name`` of the form ``model[param=value]`` (an integer
+    value: ``issm[n_init=8]``) in :data:`MODELS` as that model with the
+    parameter set; whether ``name`` is (now) known."""
+    if name in MODELS:
+        return True
+    base, _, rest = name.partition("[")
+    param, _, value = rest.rstrip("]").partition("=")
+    if base not in MODELS or not rest.endswith("]") or not value.isdigit():
+        return False
+    label, factory = MODELS[base]
+    MODELS[name] = (
+        f"{label[:-1]}{', ' if label[-2] != '(' else ''}{param}={value})",
+        lambda seed=SEED: factory(seed).set_params(**{param: int(value)}),
+    )
+    return True
+
+
 #: Best published black-box simulation RMSE and other references, per test.
 PUBLISHED = {
     ("boucwen", "multisine"): (

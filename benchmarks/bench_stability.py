@@ -24,6 +24,10 @@ per benchmark, model, split and seed) and the summary to
 the first, 2 CPU-hours for the others). The Bouc-Wen data are generated
 once, by ``random_state=0``, for every seed of the fits.
 
+A model ``name[param=value]`` is the model with that parameter set:
+``--models "issm[n_init=8]" --out FILE`` fits the ISSM with eight restarts
+(``results_restarts.md``).
+
 A figure quoted from this file is a median over seeds with its range, not
 one draw. It holds for the BLAS kernel each row records (column ``blas``):
 OpenBLAS picks its kernels by the processor, and a training path, which
@@ -47,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 from _results import read_rows
-from bench_field import BENCHMARKS, DEFAULT_MODELS, MODELS, run_one
+from bench_field import BENCHMARKS, DEFAULT_MODELS, MODELS, model_variant, run_one
 
 from sysid_nn.study._report import blas_kernels
 
@@ -216,9 +220,13 @@ def main(argv: list[str] | None = None) -> None:
     out = Path(args.out)
     benchmarks = [b for b in args.only.split(",") if b]
     models = [m for m in args.models.split(",") if m]
-    unknown = set(benchmarks) - set(BENCHMARKS) | set(models) - set(MODELS)
+    unknown = set(benchmarks) - set(BENCHMARKS) | {
+        m for m in models if not model_variant(m)
+    }
     if unknown:
         parser.error(f"unknown benchmark or model: {', '.join(sorted(unknown))}")
+    for row in read_rows(out):
+        model_variant(row["model"])  # the variants fitted before
     if args.against:
         print("\n".join(compare(read_rows(out), read_rows(Path(args.against)))))
         return
