@@ -137,7 +137,8 @@ def main(argv=None) -> None:
                         cpu_ensemble.append(cpu)
                     loads.append(os.getloadavg()[0])
                     print(system, label, name, seed, single[-len(shares) :],
-                          test, flush=True)  # fmt: skip
+                          [v[-1] for v in moved_ensembles.values()],
+                          flush=True)  # fmt: skip
                 medians = " / ".join(f"{np.median(v):.4g}" for v in per_share.values())
                 ensemble = moved_ensembles.get(0, [])
                 if len(moved_ensembles) > 1:
