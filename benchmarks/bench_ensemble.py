@@ -66,11 +66,11 @@ def _range(values) -> str:
     return f"{P.median_range(v, 4)}, {v.max() / v.min():.2f}"
 
 
-def moved(n_train, shift: int) -> tuple:
+def moved(n_train: int | None, shift: int) -> tuple:
     """The ensemble's held-out shares of a record of ``n_train`` samples,
-    each part starting ``shift`` samples later (the shares unmoved without
-    a record length)."""
-    if not n_train or not shift:
+    each part starting ``shift`` samples later (``n_train`` is needed only
+    where ``shift`` is not 0)."""
+    if not shift:
         return FRACTIONS
     return tuple((round(f * n_train) - shift) / n_train for f in FRACTIONS)
 
