@@ -10,7 +10,9 @@ oscillator's protocol P1, whose validation records are given as ``X_val``):
   and 0.3 (the default only where ``X_val`` is given), once per
   ``random_state``;
 * ``EnsembleRegressor`` of the same network (eight members, the four
-  shares in turn), once per ``random_state``;
+  shares in turn), once per ``random_state``; each ensemble is also scored
+  with every member in its median (``max_error_ratio=None``: the same fits,
+  combined as before members that miss the fitted records were left out);
 
 and reports, per case and network, the median test error, its range and
 spread (largest over smallest) over the single fits of every share and
@@ -33,6 +35,7 @@ together; the single fits under moved splits are ``bench_stability``'s.
 from __future__ import annotations
 
 import argparse
+import copy
 import os
 import platform
 import sys
@@ -75,6 +78,13 @@ def moved(n_train: int | None, shift: int) -> tuple:
     return tuple((round(f * n_train) - shift) / n_train for f in FRACTIONS)
 
 
+def _every(ensemble, score) -> float:
+    """``score`` of ``ensemble`` with every member in its median."""
+    every = copy.copy(ensemble)
+    every.members_used_ = np.ones(len(ensemble.estimators_), dtype=bool)
+    return score(every)
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--only", default="cascaded_tanks,emps")
@@ -92,9 +102,10 @@ def main(argv=None) -> None:
         f"{os.cpu_count()} cores shared with other jobs, BLAS {blas_kernels()}.",
         "",
         "| system | case | network | single: median (range), spread | "
-        "ensemble: median (range), spread | single, median per share "
-        f"{' / '.join(map(str, FRACTIONS))} | CPU-s single / ensemble |",
-        "|---|---|---|---|---|---|---|",
+        "ensemble: median (range), spread | every member | members left out | "
+        f"single, median per share {' / '.join(map(str, FRACTIONS))} | "
+        "CPU-s single / ensemble |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     moved_lines: list[str] = []
     for system in [s for s in args.only.split(",") if s]:
@@ -114,6 +125,8 @@ def main(argv=None) -> None:
                     [],
                 )
                 moved_ensembles: dict = {}
+                moved_every: dict = {}
+                left_out = members = 0
                 for seed in seeds:
                     for share in shares:
                         extra = {} if share is None else {"validation_fraction": share}
@@ -124,7 +137,7 @@ def main(argv=None) -> None:
                         per_share.setdefault(share, []).append(test)
                         cpu_single.append(cpu)
                     for shift in shifts if n_train else (0,):
-                        _, test, cpu = fit_scored(
+                        fitted, test, cpu = fit_scored(
                             fit,
                             score,
                             EnsembleRegressor(
@@ -134,6 +147,10 @@ def main(argv=None) -> None:
                             ),
                         )
                         moved_ensembles.setdefault(shift, []).append(test)
+                        moved_every.setdefault(shift, []).append(_every(fitted, score))
+                        if shift == 0:
+                            left_out += int(np.sum(~fitted.members_used_))
+                            members += len(fitted.estimators_)
                         cpu_ensemble.append(cpu)
                     loads.append(os.getloadavg()[0])
                     print(system, label, name, seed, single[-len(shares) :],
@@ -142,17 +159,21 @@ def main(argv=None) -> None:
                 medians = " / ".join(f"{np.median(v):.4g}" for v in per_share.values())
                 ensemble = moved_ensembles.get(0, [])
                 if len(moved_ensembles) > 1:
-                    every = np.concatenate(list(moved_ensembles.values()))
-                    moved_lines.append(
-                        f"| {system} | {label} | {name} | "
-                        + " | ".join(
-                            _range(moved_ensembles[k]) for k in sorted(moved_ensembles)
+                    for tag, runs in (
+                        ("", moved_ensembles),
+                        (", every member", moved_every),
+                    ):
+                        every = np.concatenate(list(runs.values()))
+                        moved_lines.append(
+                            f"| {system} | {label} | {name}{tag} | "
+                            + " | ".join(_range(runs[k]) for k in sorted(runs))
+                            + f" | {_range(every)} |"
                         )
-                        + f" | {_range(every)} |"
-                    )
                 lines.append(
                     f"| {system} | {label} | {name} | {_range(single)} | "
-                    f"{_range(ensemble)} | {medians} | "
+                    f"{_range(ensemble)} | {_range(moved_every.get(0, []))} | "
+                    f"{left_out} of {members} | "
+                    f"{medians} | "
                     f"{np.median(cpu_single):.1f} / {np.median(cpu_ensemble):.1f} |"
                 )
     if moved_lines:

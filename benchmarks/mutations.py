@@ -561,6 +561,50 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "ensemble median over every member",
+        "sysid_nn/_estimators/_ensemble.py",
+        "zip(self.estimators_, used, strict=True) if u]",
+        "zip(self.estimators_, used, strict=True)]",
+        (
+            "tests/test_ensemble.py::"
+            "test_members_that_miss_the_fitted_records_are_left_out_of_the_median",
+        ),
+    ),
+    Mutation(
+        "ensemble members judged on the training records alone",
+        "sysid_nn/_estimators/_ensemble.py",
+        "        records = [(X, y)] if X_val is None else [(X, y), (X_val, y_val)]\n",
+        "        records = [(X, y)]\n",
+        (
+            "tests/test_ensemble.py::"
+            "test_member_record_errors_are_free_runs_over_every_fitted_record",
+        ),
+    ),
+    Mutation(
+        "ensemble members kept by the worst error",
+        "sysid_nn/_estimators/_ensemble.py",
+        '    level = np.quantile(errors, 0.25, method="lower")\n',
+        "    level = errors.max()\n",
+        (
+            "tests/test_ensemble.py::"
+            "test_members_that_miss_the_fitted_records_are_left_out_of_the_median",
+        ),
+    ),
+    Mutation(
+        "ensemble members judged against the best one",
+        "sysid_nn/_estimators/_ensemble.py",
+        '    level = np.quantile(errors, 0.25, method="lower")\n',
+        "    level = errors.min()\n",
+        ("sysid_nn/_estimators/_ensemble.py::sysid_nn._estimators._ensemble._used",),
+    ),
+    Mutation(
+        "ensemble members parted by rounding",
+        "sysid_nn/_estimators/_ensemble.py",
+        "    return errors <= ratio * max(level, _ROUNDING_ERROR)\n",
+        "    return errors <= ratio * level\n",
+        ("sysid_nn/_estimators/_ensemble.py::sysid_nn._estimators._ensemble._used",),
+    ),
+    Mutation(
         "linear model trained on validation judged from rest",
         "sysid_nn/_engine/_selection.py",
         "        (lin._fit_one(train, judged, new_restart(k), n_stages)[1], k)",

@@ -3,7 +3,7 @@ the pointwise median of their runs."""
 
 import numpy as np
 import pytest
-from sklearn.base import clone
+from sklearn.base import BaseEstimator, RegressorMixin, clone
 from sklearn.utils.estimator_checks import parametrize_with_checks
 from test_tdl import ROW_ORDER_CHECKS
 
@@ -103,6 +103,8 @@ def test_errors_name_the_argument():
         EnsembleRegressor(_net(), validation_fractions=()).fit(X, y)
     with pytest.raises(ValueError, match="n_members"):
         EnsembleRegressor(_net(), n_members=0).fit(X, y)
+    with pytest.raises(ValueError, match="max_error_ratio"):
+        EnsembleRegressor(_net(), max_error_ratio=0.5).fit(X, y)
     fitted = EnsembleRegressor(_net(), n_members=1, random_state=0).fit(X, y)
     with pytest.raises(ValueError, match="return_std is not available"):
         fitted.simulate(X, return_std=True)
@@ -115,3 +117,65 @@ def test_default_members_are_issm_networks():
     fitted = ensemble.fit(X, y)
     assert isinstance(fitted.estimators_[0], ISSMRegressor)
     assert fitted.n_features_in_ == 1
+
+
+class _ShareGain(RegressorMixin, BaseEstimator):
+    """A stand-in member: ``y = gain * u``, the gain off where it held out
+    more than a fifth of the record."""
+
+    def __init__(self, validation_fraction=0.2, random_state=None):
+        self.validation_fraction = validation_fraction
+        self.random_state = random_state
+
+    def fit(self, X, y, X_val=None, y_val=None):
+        self.n_features_in_ = 1
+        self.gain_ = 1.0 if self.validation_fraction <= 0.2 else 4.0
+        self.gain_ += 0.01 * self.random_state / np.iinfo(np.int32).max
+        return self
+
+    def simulate(self, X, **kwargs):
+        return self.gain_ * np.asarray(X, dtype=float)[:, 0]
+
+    def predict(self, X, y=None, *, horizon=1):
+        return self.simulate(X)
+
+
+def test_members_that_miss_the_fitted_records_are_left_out_of_the_median():
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((400, 1))
+    y = X[:, 0] + 0.1 * rng.standard_normal(400)
+    ensemble = EnsembleRegressor(_ShareGain(), random_state=0).fit(X, y)
+    shares = np.array(ensemble.member_validation_fractions_)
+    # The members holding out 25 and 30 % miss the record 30 times worse.
+    errors = ensemble.member_record_errors_
+    assert np.all(errors[shares > 0.2] > 20 * errors[shares <= 0.2].max())
+    np.testing.assert_array_equal(ensemble.members_used_, shares <= 0.2)
+    members = np.array(ensemble.estimators_, dtype=object)
+    good = [m.simulate(X) for m in members[shares <= 0.2]]
+    np.testing.assert_array_equal(ensemble.simulate(X), np.median(good, axis=0))
+    np.testing.assert_array_equal(ensemble.predict(X), np.median(good, axis=0))
+    # max_error_ratio=None: every member; here half of them are off, and the
+    # median of all is far from the record.
+    every = clone(ensemble).set_params(max_error_ratio=None).fit(X, y)
+    assert every.members_used_.all()
+    runs = [m.simulate(X) for m in every.estimators_]
+    np.testing.assert_array_equal(every.simulate(X), np.median(runs, axis=0))
+    assert every.score(X, y) < 0 < 0.9 < ensemble.score(X, y)
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+def test_member_record_errors_are_free_runs_over_every_fitted_record():
+    (X, y), (Xv, yv) = _record(0), _record(1)
+    Xs, ys = [X[:150], X[150:]], [y[:150], y[150:]]
+    ensemble = EnsembleRegressor(_net(), n_members=3, random_state=0)
+    ensemble.fit(Xs, ys, X_val=Xv, y_val=yv)
+    measured = np.concatenate([*ys, yv])
+    for member, error in zip(
+        ensemble.estimators_, ensemble.member_record_errors_, strict=True
+    ):
+        runs = np.concatenate([*member.simulate(Xs), member.simulate(Xv)])
+        expected = np.sqrt(np.mean(((runs - measured) / measured.std()) ** 2))
+        assert error == pytest.approx(expected, rel=1e-12)
+    errors = ensemble.member_record_errors_
+    level = np.sort(errors)[0]  # the lower quartile of three: the best
+    np.testing.assert_array_equal(ensemble.members_used_, errors <= 3 * level)

@@ -7,7 +7,10 @@ record, 0.77 / 0.68 V holding out 15 / 25 %). :class:`EnsembleRegressor`
 fits the network several times, each member on its own seed and held-out
 share, and returns the pointwise median of the members' runs, which moves
 much less with those draws than any one member
-(``benchmarks/results_ensemble.md``).
+(``benchmarks/results_ensemble.md``). A member whose free run misses the
+records it was fitted to far more than the best member's does is left out
+of the median: on EMPS, members holding out the last 25-30 % of the record
+can miss that record, and the test record, five times worse than the rest.
 """
 
 from __future__ import annotations
@@ -23,8 +26,13 @@ from sklearn.utils.validation import check_is_fitted
 
 from sysid_nn._estimators._base import _RecordsRegressorTags, free_run_r2
 from sysid_nn._estimators._estimator_docs import document_estimator
+from sysid_nn._records._data import is_sequence_list
 
 __all__ = ["EnsembleRegressor"]
+
+#: Errors over the fitted records (scaled by the outputs' spread) below this
+#: are rounding: members that fit the records exactly differ by less.
+_ROUNDING_ERROR = 1e-9
 
 
 class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
@@ -34,8 +42,11 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
     and, where the validation records are held out of the training records
     (no ``X_val``), its own ``validation_fraction``. :meth:`simulate` and
     :meth:`predict` return the median over the members at every sample, so
-    one member that went astray moves the result little. It costs
-    ``n_members`` fits.
+    one member that went astray moves the result little. Members whose free
+    run from rest over the fitted records (the training records whole and
+    ``X_val``, the same for every member) misses them by more than
+    ``max_error_ratio`` times the lower quartile of the members' errors are
+    left out of the median (``members_used_``). It costs ``n_members`` fits.
 
     Parameters
     ----------
@@ -50,6 +61,12 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         members (member ``k`` holds out ``validation_fractions[k % len]``;
         see ``validation_fraction`` of the estimator). Not used where
         ``X_val`` is given: the members then differ by their seeds only.
+    max_error_ratio : float or None, default=3.0
+        A member enters the median only where its free run's root-mean-square
+        error over the fitted records (``member_record_errors_``) is at most
+        this multiple of the members' lower quartile (of eight members, the
+        second best: one member that fits the records exceptionally well
+        does not set the level); None: every member enters.
     random_state : int, RandomState instance or None, default=None
         Draws the members' seeds.
 
@@ -61,6 +78,13 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         Each member's ``random_state``.
     member_validation_fractions_ : list of float or None
         Each member's held-out share; None where ``X_val`` was given.
+    member_record_errors_ : ndarray of shape (n_members,)
+        Each member's error over the fitted records: the root-mean-square
+        error of its free run from rest over the training records and
+        ``X_val``, each output scaled by its standard deviation there;
+        ``inf`` where the run is not finite.
+    members_used_ : ndarray of bool of shape (n_members,)
+        Which members enter the median (see ``max_error_ratio``).
     n_features_in_ : int
         Number of excitation channels.
 
@@ -97,6 +121,7 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         "estimator": [None, HasMethods(["fit", "simulate", "predict"])],
         "n_members": [Interval(numbers.Integral, 1, None, closed="left")],
         "validation_fractions": ["array-like"],
+        "max_error_ratio": [None, Interval(numbers.Real, 1, None, closed="left")],
         "random_state": ["random_state"],
     }
 
@@ -106,11 +131,13 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         *,
         n_members: int = 8,
         validation_fractions=(0.15, 0.2, 0.25, 0.3),
+        max_error_ratio: float | None = 3.0,
         random_state=None,
     ):
         self.estimator = estimator
         self.n_members = n_members
         self.validation_fractions = validation_fractions
+        self.max_error_ratio = max_error_ratio
         self.random_state = random_state
 
     def fit(self, X, y, *, X_val=None, y_val=None):
@@ -158,6 +185,12 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         self.member_random_states_ = [int(s) for s in seeds]
         self.member_validation_fractions_ = shares
         self.n_features_in_ = members[0].n_features_in_
+        # Every member judged on the same data: the records whole (each
+        # member's held-out part included) and X_val.
+        records = [(X, y)] if X_val is None else [(X, y), (X_val, y_val)]
+        errors = np.array([_record_error(m, records) for m in members])
+        self.member_record_errors_ = errors
+        self.members_used_ = _used(errors, self.max_error_ratio)
         return self
 
     def simulate(self, X, **kwargs):
@@ -183,7 +216,7 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
                 "return_std is not available for an ensemble: the bands are "
                 "the members' (estimators_[k].simulate(X, return_std=True))."
             )
-        return _median([m.simulate(X, **kwargs) for m in self.estimators_])
+        return _median([m.simulate(X, **kwargs) for m in self._used_members()])
 
     def predict(self, X, y=None, *, horizon=1):
         """The median of the members' predictions at every sample.
@@ -204,7 +237,15 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
             As the members' ``predict``.
         """
         check_is_fitted(self, "estimators_")
-        return _median([m.predict(X, y, horizon=horizon) for m in self.estimators_])
+        runs = [m.predict(X, y, horizon=horizon) for m in self._used_members()]
+        return _median(runs)
+
+    def _used_members(self) -> list:
+        # Files saved before members_used_ existed: every member.
+        used = getattr(self, "members_used_", None)
+        if used is None:
+            return list(self.estimators_)
+        return [m for m, u in zip(self.estimators_, used, strict=True) if u]
 
     @document_estimator
     def score(self, X, y, sample_weight=None):
@@ -217,6 +258,50 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         %(score)s
         """
         return free_run_r2(self.predict(X), y, sample_weight)
+
+
+def _record_error(member, records) -> float:
+    """Root-mean-square error of ``member``'s free runs from rest over
+    ``records`` (``(X, y)`` pairs), each output scaled by its standard
+    deviation over them; ``inf`` where a run is not finite."""
+    errors, measured = [], []
+    for X, y in records:
+        with np.errstate(all="ignore"):
+            run = member.simulate(X)
+        parts = zip(run, y, strict=True) if is_sequence_list(y) else [(run, y)]
+        for r, m in parts:
+            m = np.asarray(m, dtype=float)
+            m = m.reshape(m.shape[0], -1)
+            errors.append(np.asarray(r, dtype=float).reshape(m.shape) - m)
+            measured.append(m)
+    error, measured = np.concatenate(errors), np.concatenate(measured)
+    if not np.all(np.isfinite(error)):
+        return np.inf
+    scale = measured.std(axis=0)
+    scale[scale == 0] = 1.0
+    return float(np.sqrt(np.mean((error / scale) ** 2)))
+
+
+def _used(errors: np.ndarray, ratio: float | None) -> np.ndarray:
+    """The members within ``ratio`` times the lower quartile of ``errors``
+    (a member's own error, at least :data:`_ROUNDING_ERROR`); all where
+    ``ratio`` is None or that quartile is not finite.
+
+    Examples
+    --------
+    >>> _used(np.array([0.5, 1.0, 2.5, 3.5, 9.0, np.inf]), 3.0)
+    array([ True,  True,  True, False, False, False])
+    >>> _used(np.array([0.1, 1.0, 1.2, 2.0, 2.5, 2.7, 3.0, 3.5]), 3.0)
+    array([ True,  True,  True,  True,  True,  True,  True, False])
+    >>> _used(np.array([np.inf, np.inf]), 3.0)
+    array([ True,  True])
+    >>> _used(np.array([1e-16, 5e-16]), 3.0)  # exact fits, up to rounding
+    array([ True,  True])
+    """
+    level = np.quantile(errors, 0.25, method="lower")
+    if ratio is None or not np.isfinite(level):
+        return np.ones(len(errors), dtype=bool)
+    return errors <= ratio * max(level, _ROUNDING_ERROR)
 
 
 def _median(runs: list):

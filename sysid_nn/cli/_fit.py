@@ -275,7 +275,12 @@ def _run_fit(args: argparse.Namespace) -> int:
     messages.append(chaos_hint(network, longest))
     for message in dict.fromkeys(m for m in messages if m):
         print(f"{_PROG}: warning: {message}", file=sys.stderr)
-    what = f"median of {len(networks)} × {model.label}" if ensemble else model.label
+    what = model.label
+    if ensemble:
+        # Members whose runs missed the records far worse are left out.
+        used = sum(bool(u) for u in fitted.members_used_)
+        of = f"{used} of {len(networks)}" if used < len(networks) else len(networks)
+        what = f"median of {of} × {model.label}"
     info = {
         "inputs": list(inputs),
         "outputs": list(outputs),
