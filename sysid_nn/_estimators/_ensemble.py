@@ -100,7 +100,7 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
     (``estimators_``). Over ``random_state`` 0-4, single default ISSM fits
     holding out 15-30 % of the record tested at 0.53-1.13 V on the Cascaded
     Tanks benchmark and 1.9-10.1 mm on EMPS, ensembles of eight at
-    0.54-0.57 V and 2.2-2.8 mm (``benchmarks/results_ensemble.md``).
+    0.54-0.57 V and 1.9-3.2 mm (``benchmarks/results_ensemble.md``).
 
     Examples
     --------
