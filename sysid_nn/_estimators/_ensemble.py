@@ -8,9 +8,10 @@ fits the network several times, each member on its own seed and held-out
 share, and returns the pointwise median of the members' runs, which moves
 much less with those draws than any one member
 (``benchmarks/results_ensemble.md``). A member whose free run misses the
-records it was fitted to far more than the best member's does is left out
-of the median: on EMPS, members holding out the last 25-30 % of the record
-can miss that record, and the test record, five times worse than the rest.
+records it was fitted to far more than most members' do is left out of the
+median: on EMPS, members holding out the last 25-30 % of the record can
+miss that record, and the test record, three to seven times worse than the
+rest.
 """
 
 from __future__ import annotations
