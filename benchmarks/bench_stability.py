@@ -225,10 +225,11 @@ def main(argv: list[str] | None = None) -> None:
     }
     if unknown:
         parser.error(f"unknown benchmark or model: {', '.join(sorted(unknown))}")
-    for row in read_rows(out):
+    published = read_rows(out)
+    for row in published:
         model_variant(row["model"])  # the variants fitted before
     if args.against:
-        print("\n".join(compare(read_rows(out), read_rows(Path(args.against)))))
+        print("\n".join(compare(published, read_rows(Path(args.against)))))
         return
     if not args.report:
         tree, blas = _tree(), blas_kernels()
