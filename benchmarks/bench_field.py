@@ -97,19 +97,23 @@ DEFAULT_MODELS = ("tdl", "issm", "linear")
 
 
 def model_variant(name: str) -> bool:
-    """Register ``name`` of the form ``model[param=value]`` (an integer
-    value: ``issm[n_init=8]``) in :data:`MODELS` as that model with the
-    parameter set; whether ``name`` is (now) known."""
+    """Register ``name`` of the form ``model[param=value]`` (a number:
+    ``issm[n_init=8]``, ``issm[alpha=0.001]``) in :data:`MODELS` as that
+    model with the parameter set; whether ``name`` is (now) known."""
     if name in MODELS:
         return True
     base, _, rest = name.partition("[")
-    param, _, value = rest.rstrip("]").partition("=")
-    if base not in MODELS or not rest.endswith("]") or not value.isdigit():
+    param, _, text = rest.rstrip("]").partition("=")
+    try:
+        value = int(text) if text.isdigit() else float(text)
+    except ValueError:
+        return False
+    if base not in MODELS or not rest.endswith("]"):
         return False
     label, factory = MODELS[base]
     MODELS[name] = (
-        f"{label[:-1]}{', ' if label[-2] != '(' else ''}{param}={value})",
-        lambda seed=SEED: factory(seed).set_params(**{param: int(value)}),
+        f"{label[:-1]}{', ' if label[-2] != '(' else ''}{param}={text})",
+        lambda seed=SEED: factory(seed).set_params(**{param: value}),
     )
     return True
 
