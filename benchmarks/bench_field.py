@@ -97,15 +97,23 @@ DEFAULT_MODELS = ("tdl", "issm", "linear")
 
 
 def model_variant(name: str) -> bool:
-    """Register ``name`` of the form ``model[param=value]`` (a number:
-    ``issm[n_init=8]``, ``issm[alpha=0.001]``) in :data:`MODELS` as that
-    model with the parameter set; whether ``name`` is (now) known."""
+    """Register ``name`` of the form ``model[param=value]`` (a number or a
+    flag: ``issm[n_init=8]``, ``issm[alpha=0.001]``, ``issm[refit=True]``)
+    in :data:`MODELS` as that model with the parameter set; whether
+    ``name`` is (now) known."""
     if name in MODELS:
         return True
     base, _, rest = name.partition("[")
     param, _, text = rest.rstrip("]").partition("=")
     try:
-        value = int(text) if text.isdigit() else float(text)
+        flags = {"True": True, "False": False}
+        value = (
+            flags[text]
+            if text in flags
+            else int(text)
+            if text.isdigit()
+            else float(text)
+        )
     except ValueError:
         return False
     if base not in MODELS or not rest.endswith("]"):

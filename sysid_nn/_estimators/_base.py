@@ -46,6 +46,7 @@ from sysid_nn._engine._diagnosis import (
 )
 from sysid_nn._engine._layout import MLPLayout
 from sysid_nn._engine._order import select_order
+from sysid_nn._engine._refit import refit
 from sysid_nn._engine._schedule import training_stages
 from sysid_nn._engine._solvers import _Objective
 from sysid_nn._engine._state_estimation import (
@@ -144,6 +145,7 @@ class _RecurrentRegressorBase(
         "early_stopping": ["boolean"],
         "validation_fraction": [Interval(numbers.Real, 0, 1, closed="neither")],
         "n_iter_no_change": [Interval(numbers.Integral, 1, None, closed="left")],
+        "refit": ["boolean"],
         "random_state": ["random_state"],
         "verbose": ["verbose"],
         "n_jobs": [None, numbers.Integral],
@@ -314,9 +316,10 @@ class _RecurrentRegressorBase(
             result = train(self, train_data, val)
             val = result.validation  # as judged (burn-in, fitted start)
             self._keep_training(result, val)
-            self._after_fit(train_data, val)
-            _uncertainty.fit_covariance(self, train_data)
-            modelled = train_data.Y[train_data.modelled]
+            fitted = self._refit(Xs, ys, Xv, yv, lead > 0, val) or train_data
+            self._after_fit(fitted, val)
+            _uncertainty.fit_covariance(self, fitted)
+            modelled = fitted.Y[fitted.modelled]
             self._y_range = (modelled.min(axis=0), modelled.max(axis=0))
             self.rest_check_ = self._rest_check()
             self.rest_output_ = self.rest_check_.output
@@ -349,6 +352,52 @@ class _RecurrentRegressorBase(
                 stacklevel=user_stacklevel(),
             )
         return self
+
+    def _refit(self, Xs, ys, Xv, yv, tail: bool, val: _Data | None) -> _Data | None:
+        """Continue the chosen weights on the validation records too
+        (``refit``; see :mod:`sysid_nn._engine._refit`).
+
+        Sets ``refit_steps_``, ``refit_losses_`` and ``refit_advantage_``;
+        returns the records the weights were last trained on (the training
+        and validation records), or None where there was no refit.
+        """
+        self.refit_steps_ = self.refit_losses_ = self.refit_advantage_ = None
+        if not self.refit or val is None:
+            return None
+        if tail:  # the held-out tail continues the last training record
+            X_last, y_last = (
+                np.concatenate([Xs[-1], Xv[0]]),
+                np.concatenate([ys[-1], yv[0]]),
+            )
+            lead = len(Xs[-1]) + len(Xv[0]) // 2
+            inner = self._stack([*Xs[:-1], X_last[:lead]], [*ys[:-1], y_last[:lead]])
+            judged = dataclasses.replace(self._stack([X_last], [y_last]), lead=lead)
+            whole = self._stack([*Xs[:-1], X_last], [*ys[:-1], y_last])
+            halves = len(Xv[0]) - len(Xv[0]) // 2
+        else:
+            lead = min(len(x) for x in Xv) // 2
+            inner = self._stack(
+                [*Xs, *(x[:lead] for x in Xv)], [*ys, *(y[:lead] for y in yv)]
+            )
+            judged = dataclasses.replace(
+                self._stack(Xv, yv),
+                lead=lead,
+                burn=val.burn,
+                start_window=val.start_window,
+            )
+            whole = self._stack([*Xs, *Xv], [*ys, *yv])
+            halves = lead
+        if min(lead, halves) < self._min_samples():
+            self.refit_steps_ = 0  # too little held out to halve
+            return None
+        done = refit(self, self.coefs_, inner, judged, whole)
+        self.coefs_ = done.w
+        self.refit_steps_ = done.steps
+        self.refit_losses_ = done.losses
+        self.refit_advantage_ = done.advantage
+        if done.steps:
+            self.loss_ = done.loss
+        return whole if done.steps else None
 
     def _stack_fit_records(self, Xs, ys, Xv, yv, tail: bool = False):
         """The training and validation records stacked.

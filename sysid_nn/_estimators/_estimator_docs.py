@@ -40,6 +40,13 @@ validation_fraction : float, default=0.2
     passed as ``X_val``).
 n_iter_no_change : int, default=10
     Patience of early stopping, in accepted steps.
+refit : bool, default=False
+    After the restarts are chosen, continue the last stage from the chosen
+    weights on the training and validation records together, for the
+    number of steps an inner validation chose: the same continuation on
+    the training records and the first half of every validation record,
+    judged on the second halves; kept where its best step beat the chosen
+    weights there by more than two standard errors (``refit_steps_``).
 random_state : int, RandomState instance or None, default=None
     Seeds the restarts' initial weights.
 verbose : bool, default=False
@@ -145,6 +152,20 @@ refinement_advantage_ : float or None
     autocorrelation): the restart is kept only above 2, else the
     refinement. Infinite where a free run diverged; None where no such
     comparison was made.
+refit_steps_ : int or None
+    Accepted steps the chosen weights were continued on the training and
+    validation records together (``refit``): 0 where the inner validation
+    chose none, or none beat the chosen weights by more than two standard
+    errors, or the validation records were too short to halve; None
+    without ``refit`` or validation records.
+refit_losses_ : ndarray or None
+    The inner validation loss of ``refit`` (standardised mean squared
+    error on the second halves of the validation records) at the chosen
+    weights and after each accepted step of the continuation on the
+    training records and the first halves.
+refit_advantage_ : float or None
+    Standard errors by which the best step of ``refit_losses_`` beat the
+    chosen weights (nan where the best was the chosen weights).
 closed_form_restarts_ : list of int
     Indices in ``restart_scores_`` of the linear model's closed-form fits,
     judged as they are, untrained (a model without hidden layers; empty

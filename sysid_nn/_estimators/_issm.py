@@ -265,7 +265,9 @@ class ISSMRegressor(_RecurrentRegressorBase):
     n_iter_ : int
         Solver iterations of the chosen restart over all stages.
     loss_ : float
-        Final training loss of the chosen restart, in standardised units.
+        Final training loss of the chosen restart, in standardised units
+        (after a ``refit``, of the weights returned on the training and
+        validation records together).
     %(selection_attributes)s
     alpha_ : float
         The weight penalty used (see ``alpha``).
@@ -334,6 +336,7 @@ class ISSMRegressor(_RecurrentRegressorBase):
         early_stopping=True,
         validation_fraction=0.2,
         n_iter_no_change=10,
+        refit=False,
         random_state=None,
         verbose=False,
         n_jobs=None,

@@ -153,7 +153,8 @@ class TDLRegressor(_RecurrentRegressorBase):
         Solver iterations of the chosen restart over all stages.
     loss_ : float
         Final training loss of the chosen restart (free run for simulation
-        focus), in standardised units.
+        focus), in standardised units (after a ``refit``, of the weights
+        returned on the training and validation records together).
     %(selection_attributes)s
     shooting_ : {"measured", "free"}
         How the shooting segments started (see ``shooting``).
@@ -224,6 +225,7 @@ class TDLRegressor(_RecurrentRegressorBase):
         early_stopping=True,
         validation_fraction=0.2,
         n_iter_no_change=10,
+        refit=False,
         random_state=None,
         verbose=False,
         n_jobs=None,
