@@ -630,6 +630,78 @@ MUTATIONS = (
             "tests/test_schedule.py::test_halving_keeps_the_restart_selected_by_validation",
         ),
     ),
+    Mutation(
+        "refit without the margin",
+        "sysid_nn/_engine/_refit.py",
+        "        if advantage > _SIGNIFICANT:\n",
+        "        if advantage > -np.inf:\n",
+        (
+            "tests/test_refit.py::"
+            "test_refit_keeps_the_chosen_weights_unless_a_step_is_clearly_ahead",
+        ),
+    ),
+    Mutation(
+        "refit steps one too many",
+        "sysid_nn/_engine/_refit.py",
+        "            steps = best\n",
+        "            steps = best + 1\n",
+        (
+            "tests/test_refit.py::"
+            "test_refit_continues_on_every_record_for_the_steps_the_inner_"
+            "validation_chose",
+        ),
+    ),
+    Mutation(
+        "refit continued on the inner records",
+        "sysid_nn/_engine/_refit.py",
+        "        out = _continue(est, whole, w, count)\n",
+        "        out = _continue(est, inner, w, count)\n",
+        (
+            "tests/test_refit.py::"
+            "test_refit_continues_on_every_record_for_the_steps_the_inner_"
+            "validation_chose",
+        ),
+    ),
+    Mutation(
+        "refit keeps a diverged continuation",
+        "sysid_nn/_engine/_refit.py",
+        "    if not np.isfinite(loss):",
+        "    if False:",
+        (
+            "tests/test_refit.py::"
+            "test_a_continuation_whose_free_run_diverges_is_not_kept",
+        ),
+    ),
+    Mutation(
+        "refit judges the whole tail",
+        "sysid_nn/_estimators/_base.py",
+        "            lead = len(Xs[-1]) + half\n",
+        "            lead = len(Xs[-1])\n",
+        (
+            "tests/test_refit.py::"
+            "test_refit_judges_the_second_half_of_the_held_out_tail",
+        ),
+    ),
+    Mutation(
+        "refit judges validation records from their start",
+        "sysid_nn/_estimators/_base.py",
+        "                lead=half,\n",
+        "                lead=0,\n",
+        (
+            "tests/test_refit.py::"
+            "test_refit_judges_validation_records_after_half_the_shortest",
+        ),
+    ),
+    Mutation(
+        "refit halves too short",
+        "sysid_nn/_estimators/_base.py",
+        "        if half < self._min_samples():\n",
+        "        if half < 1:\n",
+        (
+            "tests/test_refit.py::"
+            "test_refit_needs_validation_records_long_enough_to_halve",
+        ),
+    ),
 )
 
 

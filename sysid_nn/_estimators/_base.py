@@ -364,32 +364,29 @@ class _RecurrentRegressorBase(
         self.refit_steps_ = self.refit_losses_ = self.refit_advantage_ = None
         if not self.refit or val is None:
             return None
+        # Half of every validation record joins the inner training records.
+        half = (len(Xv[0]) if tail else min(len(x) for x in Xv)) // 2
+        if half < self._min_samples():
+            self.refit_steps_ = 0  # too little held out to halve
+            return None
         if tail:  # the held-out tail continues the last training record
-            X_last, y_last = (
-                np.concatenate([Xs[-1], Xv[0]]),
-                np.concatenate([ys[-1], yv[0]]),
-            )
-            lead = len(Xs[-1]) + len(Xv[0]) // 2
+            X_last = np.concatenate([Xs[-1], Xv[0]])
+            y_last = np.concatenate([ys[-1], yv[0]])
+            lead = len(Xs[-1]) + half
             inner = self._stack([*Xs[:-1], X_last[:lead]], [*ys[:-1], y_last[:lead]])
             judged = dataclasses.replace(self._stack([X_last], [y_last]), lead=lead)
             whole = self._stack([*Xs[:-1], X_last], [*ys[:-1], y_last])
-            halves = len(Xv[0]) - len(Xv[0]) // 2
         else:
-            lead = min(len(x) for x in Xv) // 2
             inner = self._stack(
-                [*Xs, *(x[:lead] for x in Xv)], [*ys, *(y[:lead] for y in yv)]
+                [*Xs, *(x[:half] for x in Xv)], [*ys, *(y[:half] for y in yv)]
             )
             judged = dataclasses.replace(
                 self._stack(Xv, yv),
-                lead=lead,
+                lead=half,
                 burn=val.burn,
                 start_window=val.start_window,
             )
             whole = self._stack([*Xs, *Xv], [*ys, *yv])
-            halves = lead
-        if min(lead, halves) < self._min_samples():
-            self.refit_steps_ = 0  # too little held out to halve
-            return None
         done = refit(self, self.coefs_, inner, judged, whole)
         self.coefs_ = done.w
         self.refit_steps_ = done.steps
