@@ -13,6 +13,7 @@ caller trusts them.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import io
 import json
 import math
@@ -322,6 +323,11 @@ class _Decoder:
             # The attributes as saved; no __setstate__ (the version is
             # checked once, for the file).
             estimator.__dict__.update(self.mapping(value.get("v")))
+            # A parameter added since the file was written takes its
+            # default, which is how the model was fitted.
+            for name, parameter in inspect.signature(cls).parameters.items():
+                if name not in estimator.__dict__:
+                    setattr(estimator, name, parameter.default)
             return estimator
         raise self.broken(f"unknown type {tag!r}")
 

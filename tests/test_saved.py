@@ -1,5 +1,6 @@
 """Model files: round trips, the format's checks, and pickles refused unread."""
 
+import copy
 import json
 import pathlib
 import pickle
@@ -255,6 +256,20 @@ def test_a_model_of_another_version_warns_on_load(fitted_models, tmp_path):
     with pytest.warns(InconsistentVersionWarning, match="model.sysid was saved"):
         _, info = load_model(path, with_info=True)
     assert info.sysid_nn_version == "0.0.1"
+
+
+def test_a_file_written_before_a_parameter_existed_loads_with_its_default(
+    fitted_models, tmp_path
+):
+    est, X, _ = fitted_models["tdl", 1]
+    older = copy.copy(est)
+    del older.refit  # as a file written before the parameter existed
+    path = tmp_path / "model.sysid"
+    save_model(older, path)
+    loaded = load_model(path)
+    assert loaded.refit is False
+    assert loaded.get_params() == est.get_params()
+    np.testing.assert_array_equal(loaded.simulate(X), est.simulate(X))
 
 
 def test_validate_reads_an_old_model_file_only_when_trusted(
