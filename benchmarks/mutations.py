@@ -631,6 +631,16 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "old files without a new parameter",
+        "sysid_nn/_saved.py",
+        "                    setattr(estimator, name, parameter.default)\n",
+        "                    pass\n",
+        (
+            "tests/test_saved.py::"
+            "test_a_file_written_before_a_parameter_existed_loads_with_its_default",
+        ),
+    ),
+    Mutation(
         "refit without the margin",
         "sysid_nn/_engine/_refit.py",
         "        if advantage > _SIGNIFICANT:\n",
@@ -665,11 +675,21 @@ MUTATIONS = (
     Mutation(
         "refit keeps a diverged continuation",
         "sysid_nn/_engine/_refit.py",
-        "    if not np.isfinite(loss):",
-        "    if False:",
+        "        if not (np.isfinite(loss) and ratio <= _LINEAR_FIT_MARGIN):\n",
+        "        if ratio > _LINEAR_FIT_MARGIN:\n",
         (
             "tests/test_refit.py::"
-            "test_a_continuation_whose_free_run_diverges_is_not_kept",
+            "test_a_continuation_that_diverges_on_the_validation_records_is_not_kept",
+        ),
+    ),
+    Mutation(
+        "refit ignores the training records",
+        "sysid_nn/_engine/_refit.py",
+        "        if not (np.isfinite(loss) and ratio <= _LINEAR_FIT_MARGIN):\n",
+        "        if not np.isfinite(loss):\n",
+        (
+            "tests/test_refit.py::"
+            "test_refit_keeps_the_chosen_weights_where_the_training_records_fit_worse",
         ),
     ),
     Mutation(

@@ -22,6 +22,12 @@ from sysid_nn._engine._solvers import _EarlyStop, _Objective
 from sysid_nn._records._data import _FREE_RUN
 
 
+def _model(**params):
+    # Seed 2: a fit whose continuation the inner validation and the margins
+    # keep (seed 0's fits the training part 3.2 times worse).
+    return _small(**{"random_state": 2, **params})
+
+
 def _fit(model, *args, **kwargs):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -38,12 +44,12 @@ def records():
 def plain(records):
     """The fit without ``refit``: its weights are the ones a refit starts at."""
     X, y = records
-    return _fit(_small(), X[0], y[0])
+    return _fit(_model(), X[0], y[0])
 
 
 def test_refit_judges_the_second_half_of_the_held_out_tail(records, plain):
     X, y = records
-    refitted = _fit(_small(refit=True), X[0], y[0])
+    refitted = _fit(_model(refit=True), X[0], y[0])
     # 800 samples, the last fifth held out: the tail starts at 640, and
     # the inner validation judges it from its middle, 720, in continuation.
     record = plain._stack([X[0]], [y[0]])
@@ -58,7 +64,7 @@ def test_refit_continues_on_every_record_for_the_steps_the_inner_validation_chos
     records, plain
 ):
     X, y = records
-    refitted = _fit(_small(refit=True), X[0], y[0])
+    refitted = _fit(_model(refit=True), X[0], y[0])
     steps = refitted.refit_steps_
     assert steps == np.argmin(refitted.refit_losses_) > 0
     assert refitted.refit_advantage_ > _SIGNIFICANT
@@ -85,21 +91,44 @@ def test_refit_keeps_the_chosen_weights_unless_a_step_is_clearly_ahead(
 ):
     X, y = records
     monkeypatch.setattr(_refit, "validation_advantage", lambda *a: _SIGNIFICANT)
-    kept = _fit(_small(refit=True), X[0], y[0])
+    kept = _fit(_model(refit=True), X[0], y[0])
     assert kept.refit_steps_ == 0 and kept.refit_advantage_ == _SIGNIFICANT
     np.testing.assert_array_equal(kept.coefs_, plain.coefs_)
     assert kept.loss_ == plain.loss_
     ahead = _SIGNIFICANT + 0.01
     monkeypatch.setattr(_refit, "validation_advantage", lambda *a: ahead)
-    taken = _fit(_small(refit=True), X[0], y[0])
+    taken = _fit(_model(refit=True), X[0], y[0])
     assert taken.refit_steps_ == np.argmin(taken.refit_losses_) > 0
+
+
+def test_refit_keeps_the_chosen_weights_where_the_training_records_fit_worse(
+    records, plain, monkeypatch
+):
+    X, y = records
+    refitted = _fit(_model(refit=True), X[0], y[0])
+    train = plain._stack([X[0][:640]], [y[0][:640]])  # the tail held out
+    n_res = len(train.modelled)
+    on_train = _Objective(plain, train, _FREE_RUN, plain._penalty_mask(), n_res)
+    ratio = on_train.loss(refitted.coefs_) / on_train.loss(plain.coefs_)
+    assert refitted.refit_steps_ > 0
+    assert refitted.refit_training_ratio_ == pytest.approx(ratio)
+    # The same continuation held to a margin it exceeds: the chosen weights.
+    monkeypatch.setattr(_refit, "_LINEAR_FIT_MARGIN", 0.99 * ratio)
+    kept = _fit(_model(refit=True), X[0], y[0])
+    assert kept.refit_steps_ == 0
+    assert kept.refit_training_ratio_ == pytest.approx(ratio)
+    np.testing.assert_array_equal(kept.coefs_, plain.coefs_)
+    # Unpatched: seed 0's continuation fits the training part 3.2 times worse.
+    worse = _fit(_small(refit=True), X[0], y[0])
+    assert worse.refit_training_ratio_ > 2 and worse.refit_steps_ == 0
+    np.testing.assert_array_equal(worse.coefs_, _fit(_small(), X[0], y[0]).coefs_)
 
 
 def test_refit_judges_validation_records_after_half_the_shortest(records):
     X, y = records
     Xv, yv = [X[1][:300], X[1][300:500]], [y[1][:300], y[1][300:500]]
-    plain = _fit(_small(), X[0][:600], y[0][:600], X_val=Xv, y_val=yv)
-    refitted = _fit(_small(refit=True), X[0][:600], y[0][:600], X_val=Xv, y_val=yv)
+    plain = _fit(_model(), X[0][:600], y[0][:600], X_val=Xv, y_val=yv)
+    refitted = _fit(_model(refit=True), X[0][:600], y[0][:600], X_val=Xv, y_val=yv)
     judged = dataclasses.replace(
         plain._stack(Xv, yv),
         lead=100,  # half the shorter record, of 200 samples
@@ -115,13 +144,13 @@ def test_refit_judges_validation_records_after_half_the_shortest(records):
 def test_refit_needs_validation_records_long_enough_to_halve(records, plain):
     X, y = records
     assert plain.refit_steps_ is None and plain.refit_losses_ is None
-    alone = _fit(_small(refit=True, early_stopping=False), X[0], y[0])
+    alone = _fit(_model(refit=True, early_stopping=False), X[0], y[0])
     assert alone.refit_steps_ is None and alone.refit_advantage_ is None
     # A half of 3 samples is shorter than a record the fit accepts (its
     # three lags and one sample to model).
     short = [X[1][:7]], [y[1][:7]]
-    kept = _fit(_small(refit=True), X[0], y[0], X_val=short[0], y_val=short[1])
-    again = _fit(_small(), X[0], y[0], X_val=short[0], y_val=short[1])
+    kept = _fit(_model(refit=True), X[0], y[0], X_val=short[0], y_val=short[1])
+    again = _fit(_model(), X[0], y[0], X_val=short[0], y_val=short[1])
     assert kept.refit_steps_ == 0 and kept.refit_losses_ is None
     np.testing.assert_array_equal(kept.coefs_, again.coefs_)
 
@@ -139,9 +168,31 @@ def test_a_continuation_whose_free_run_diverges_is_not_kept(
         return out if len(calls) == 1 else np.full_like(out, np.nan)
 
     monkeypatch.setattr(_refit, "_continue", diverging)
-    kept = _fit(_small(refit=True), X[0], y[0])
+    kept = _fit(_model(refit=True), X[0], y[0])
     assert len(calls) == 2  # the inner continuation, then the one on all
     assert kept.refit_steps_ == 0
+    np.testing.assert_array_equal(kept.coefs_, plain.coefs_)
+
+
+def test_a_continuation_that_diverges_on_the_validation_records_is_not_kept(
+    records, plain, monkeypatch
+):
+    # Fits the training records as well as ever, and its free run over the
+    # whole record (the held-out tail included) diverges.
+    X, y = records
+    chosen = _fit(_model(refit=True), X[0], y[0])
+    assert chosen.refit_steps_ > 0
+
+    class Diverging(_Objective):
+        def loss(self, w):
+            whole = len(self.data.Y) > 700
+            moved = not np.array_equal(w, plain.coefs_)
+            return np.inf if whole and moved else super().loss(w)
+
+    monkeypatch.setattr(_refit, "_Objective", Diverging)
+    kept = _fit(_model(refit=True), X[0], y[0])
+    assert kept.refit_steps_ == 0
+    assert kept.refit_training_ratio_ == pytest.approx(chosen.refit_training_ratio_)
     np.testing.assert_array_equal(kept.coefs_, plain.coefs_)
 
 
@@ -159,4 +210,4 @@ def test_refit_runs_for_the_issm(records):
 def test_refit_must_be_a_flag(records):
     X, y = records
     with pytest.raises(InvalidParameterError, match="'refit' parameter"):
-        _small(refit="yes").fit(X[0], y[0])
+        _model(refit="yes").fit(X[0], y[0])

@@ -357,11 +357,13 @@ class _RecurrentRegressorBase(
         """Continue the chosen weights on the validation records too
         (``refit``; see :mod:`sysid_nn._engine._refit`).
 
-        Sets ``refit_steps_``, ``refit_losses_`` and ``refit_advantage_``;
+        Sets ``refit_steps_``, ``refit_losses_``, ``refit_advantage_`` and
+        ``refit_training_ratio_``;
         returns the records the weights were last trained on (the training
         and validation records), or None where there was no refit.
         """
         self.refit_steps_ = self.refit_losses_ = self.refit_advantage_ = None
+        self.refit_training_ratio_ = None
         if not self.refit or val is None:
             return None
         # Half of every validation record joins the inner training records.
@@ -387,11 +389,13 @@ class _RecurrentRegressorBase(
                 start_window=val.start_window,
             )
             whole = self._stack([*Xs, *Xv], [*ys, *yv])
-        done = refit(self, self.coefs_, inner, judged, whole)
+        train = self._stack(Xs, ys)
+        done = refit(self, self.coefs_, train, inner, judged, whole)
         self.coefs_ = done.w
         self.refit_steps_ = done.steps
         self.refit_losses_ = done.losses
         self.refit_advantage_ = done.advantage
+        self.refit_training_ratio_ = done.training_ratio
         if done.steps:
             self.loss_ = done.loss
         return whole if done.steps else None

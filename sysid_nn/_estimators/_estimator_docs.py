@@ -46,7 +46,9 @@ refit : bool, default=False
     number of steps an inner validation chose: the same continuation on
     the training records and the first half of every validation record,
     judged on the second halves; kept where its best step beat the chosen
-    weights there by more than two standard errors (``refit_steps_``).
+    weights there by more than two standard errors and the continued
+    weights fit the training records no worse than twice the chosen ones
+    (``refit_steps_``).
 random_state : int, RandomState instance or None, default=None
     Seeds the restarts' initial weights.
 verbose : bool, default=False
@@ -156,8 +158,9 @@ refit_steps_ : int or None
     Accepted steps the chosen weights were continued on the training and
     validation records together (``refit``): 0 where the inner validation
     chose none, or none beat the chosen weights by more than two standard
-    errors, or the validation records were too short to halve; None
-    without ``refit`` or validation records.
+    errors, or the continuation fitted the training records more than
+    twice worse (``refit_training_ratio_``), or the validation records were
+    too short to halve; None without ``refit`` or validation records.
 refit_losses_ : ndarray or None
     The inner validation loss of ``refit`` (standardised mean squared
     error on the second halves of the validation records) at the chosen
@@ -166,6 +169,11 @@ refit_losses_ : ndarray or None
 refit_advantage_ : float or None
     Standard errors by which the best step of ``refit_losses_`` beat the
     chosen weights (nan where the best was the chosen weights).
+refit_training_ratio_ : float or None
+    The free-run loss on the training records of the weights continued on
+    all the records over the chosen weights': above 2 (or where the
+    continued free run diverged) the chosen weights stay and
+    ``refit_steps_`` is 0. Nan where no step was taken on all the records.
 closed_form_restarts_ : list of int
     Indices in ``restart_scores_`` of the linear model's closed-form fits,
     judged as they are, untrained (a model without hidden layers; empty
