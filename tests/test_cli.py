@@ -241,6 +241,33 @@ def test_fit_validate_round_trip_tdl(records, tmp_path, capsys):
 
 
 @pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_fit_refit_continues_on_the_validation_records(records, tmp_path, capsys):
+    from sysid_nn import TDLRegressor, load_model
+
+    (a, b), _ = records
+    model = tmp_path / "refit.sysid"
+    argv = ["fit", str(a), "--input", "force", "--output", "displacement"]
+    argv += ["--hidden", "3", *TINY_FIT, "--val", str(b), "--refit"]
+    assert main([*argv, "--save", str(model)]) == 0
+    assert "refit=True" in capsys.readouterr().out
+    loaded = load_model(model)
+    # The fit a user would get in Python with refit=True.
+    net = TDLRegressor(
+        hidden_layer_sizes=(3,), n_init=1, max_iter=5, refit=True, random_state=0
+    )
+    train, val = pd.read_csv(a), pd.read_csv(b)
+    same = net.fit(
+        train[["force"]].to_numpy(),
+        train["displacement"].to_numpy(),
+        X_val=val[["force"]].to_numpy(),
+        y_val=val["displacement"].to_numpy(),
+    )
+    assert loaded.refit and loaded.refit_steps_ == same.refit_steps_
+    np.testing.assert_array_equal(loaded.refit_losses_, same.refit_losses_)
+    np.testing.assert_array_equal(loaded.coefs_, same.coefs_)
+
+
 def test_fit_members_saves_the_median_of_their_fits(records, tmp_path, capsys):
     from sysid_nn import EnsembleRegressor, TDLRegressor, load_model
 

@@ -111,6 +111,14 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
         help="free-run or one-step errors minimised",
     )
     p.add_argument(
+        "--refit",
+        action="store_true",
+        help="once the weights are chosen, continue training them on the "
+        "validation records too, as far as an inner validation on their halves "
+        "says (refit=True; pays where the validation records are further "
+        "experiments like the training ones)",
+    )
+    p.add_argument(
         "--members",
         type=_positive_int,
         default=1,
@@ -161,6 +169,7 @@ def _estimator(args: argparse.Namespace):
         "focus": args.focus,
         "n_init": args.n_init,
         "max_iter": args.max_iter,
+        "refit": True if args.refit else None,
     }
     if args.model == "tdl":
         cls = TDLRegressor
