@@ -50,9 +50,9 @@ class Refit:
     #: each accepted step of the inner continuation.
     losses: np.ndarray
     #: Standard errors by which the inner validation's best step beat the
-    #: chosen weights (nan where no step was taken inside).
+    #: chosen weights (nan where the best was the chosen weights).
     advantage: float
-    #: The final objective of ``w`` on the records it was last trained on.
+    #: The final objective of ``w`` on the training and validation records.
     loss: float
     #: The continued weights' final objective on the training records over
     #: the chosen weights' (nan where no step was taken on all the records).
@@ -70,14 +70,14 @@ def _continue(est, data: _Data, w: np.ndarray, observe) -> np.ndarray:
     last = [w]
 
     def step(weights):
-        last[0] = weights
-        observe(weights)
+        last[0] = np.array(weights, copy=True)  # the solver's array moves on
+        observe(last[0])
 
     theta = objective.start(w)
     _SOLVERS[est.solver](
         objective, theta, est.max_iter, est.tol, objective.track(step), None
     )
-    return np.array(last[0], copy=True)
+    return last[0]
 
 
 def refit(
@@ -95,7 +95,7 @@ def refit(
 
     def judge(weights):
         losses.append(validation_loss(est, weights, judged, seg))
-        kept.append(np.array(weights, copy=True))
+        kept.append(weights)  # a copy (see _continue)
 
     _continue(est, inner, w, judge)
     best = int(np.argmin(losses))  # the first of equals: 0 keeps ``w``
