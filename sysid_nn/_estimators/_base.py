@@ -316,7 +316,8 @@ class _RecurrentRegressorBase(
             result = train(self, train_data, val)
             val = result.validation  # as judged (burn-in, fitted start)
             self._keep_training(result, val)
-            fitted = self._refit(Xs, ys, Xv, yv, lead > 0, val) or train_data
+            tail = lead > 0
+            fitted = self._refit(train_data, Xs, ys, Xv, yv, tail, val) or train_data
             self._after_fit(fitted, val)
             _uncertainty.fit_covariance(self, fitted)
             modelled = fitted.Y[fitted.modelled]
@@ -353,12 +354,16 @@ class _RecurrentRegressorBase(
             )
         return self
 
-    def _refit(self, Xs, ys, Xv, yv, tail: bool, val: _Data | None) -> _Data | None:
+    def _refit(
+        self, train: _Data, Xs, ys, Xv, yv, tail: bool, val: _Data | None
+    ) -> _Data | None:
         """Continue the chosen weights on the validation records too
         (``refit``; see :mod:`sysid_nn._engine._refit`).
 
-        Sets ``refit_steps_``, ``refit_losses_``, ``refit_advantage_`` and
-        ``refit_training_ratio_``;
+        ``train``: the training records ``Xs``, ``ys`` stacked; ``val``: the
+        validation records ``Xv``, ``yv`` as judged; ``tail``: ``Xv`` is the
+        held-out tail of the last training record. Sets ``refit_steps_``,
+        ``refit_losses_``, ``refit_advantage_`` and ``refit_training_ratio_``;
         returns the records the weights were last trained on (the training
         and validation records), or None where there was no refit.
         """
@@ -389,7 +394,6 @@ class _RecurrentRegressorBase(
                 start_window=val.start_window,
             )
             whole = self._stack([*Xs, *Xv], [*ys, *yv])
-        train = self._stack(Xs, ys)
         done = refit(self, self.coefs_, train, inner, judged, whole)
         self.coefs_ = done.w
         self.refit_steps_ = done.steps
