@@ -115,6 +115,7 @@ def refit(
                 raise _EarlyStop
 
         out = _continue(est, whole, w, count)
+        steps = taken[0]  # fewer where the stage converged before them
 
     def objective(data):
         n_res = len(data.modelled) * est.n_outputs_
