@@ -105,19 +105,15 @@ def model_variant(name: str) -> bool:
         return True
     base, _, rest = name.partition("[")
     param, _, text = rest.rstrip("]").partition("=")
-    try:
-        flags = {"True": True, "False": False}
-        value = (
-            flags[text]
-            if text in flags
-            else int(text)
-            if text.isdigit()
-            else float(text)
-        )
-    except ValueError:
-        return False
     if base not in MODELS or not rest.endswith("]"):
         return False
+    if text in ("True", "False"):
+        value = text == "True"
+    else:
+        try:
+            value = int(text) if text.isdigit() else float(text)
+        except ValueError:
+            return False
     label, factory = MODELS[base]
     MODELS[name] = (
         f"{label[:-1]}{', ' if label[-2] != '(' else ''}{param}={text})",
