@@ -662,6 +662,16 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "refit reports the steps it asked for",
+        "sysid_nn/_engine/_refit.py",
+        "        steps = taken[0]  # fewer where the stage converged before them\n",
+        "",
+        (
+            "tests/test_refit.py::"
+            "test_refit_reports_the_steps_taken_where_the_stage_ends_before_them",
+        ),
+    ),
+    Mutation(
         "refit continued on the inner records",
         "sysid_nn/_engine/_refit.py",
         "        out = _continue(est, whole, w, count)\n",

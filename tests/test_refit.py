@@ -61,11 +61,15 @@ def test_refit_judges_the_second_half_of_the_held_out_tail(records, plain):
 
 
 def test_refit_continues_on_every_record_for_the_steps_the_inner_validation_chose(
-    records, plain
+    records,
 ):
     X, y = records
-    refitted = _fit(_model(refit=True), X[0], y[0])
+    # A budget of 20: the inner validation's best step (12) falls short of
+    # it, so one step more or fewer on all the records would show.
+    plain = _fit(_model(max_iter=20), X[0], y[0])
+    refitted = _fit(_model(refit=True, max_iter=20), X[0], y[0])
     steps = refitted.refit_steps_
+    assert steps < len(refitted.refit_losses_) - 1
     assert steps == np.argmin(refitted.refit_losses_) > 0
     assert refitted.refit_advantage_ > _SIGNIFICANT
     # The same continuation by hand: the last stage, on the whole record,
@@ -84,6 +88,34 @@ def test_refit_continues_on_every_record_for_the_steps_the_inner_validation_chos
     final = _Objective(plain, whole, _FREE_RUN, plain._penalty_mask(), n_res)
     assert refitted.loss_ == pytest.approx(final.loss(by_hand))
     assert refitted.loss_ < final.loss(plain.coefs_)
+
+
+def test_refit_reports_the_steps_taken_where_the_stage_ends_before_them(
+    records, monkeypatch
+):
+    X, y = records
+    original = _refit._continue
+    calls = []
+
+    def ends_early(est, data, w, observe):
+        calls.append(data)
+        if len(calls) == 1:  # the inner continuation runs as it would
+            return original(est, data, w, observe)
+
+        taken = []
+
+        def three(weights):  # on all the records, the stage ends after three
+            observe(weights)
+            taken.append(1)
+            if len(taken) == 3:
+                raise _EarlyStop
+
+        return original(est, data, w, three)
+
+    monkeypatch.setattr(_refit, "_continue", ends_early)
+    refitted = _fit(_model(refit=True), X[0], y[0])
+    assert np.argmin(refitted.refit_losses_) > 3
+    assert refitted.refit_steps_ == 3
 
 
 def test_refit_keeps_the_chosen_weights_unless_a_step_is_clearly_ahead(
