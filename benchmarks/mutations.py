@@ -127,9 +127,50 @@ MUTATIONS = (
     Mutation(
         "run-in without rest",
         "sysid_nn/_estimators/_base.py",
-        "lead = _RUN_IN if rest is not None else 0",
+        'lead = _RUN_IN if start != "zero" else 0',
         "lead = _RUN_IN",
         (f"{POLICY}::test_a_model_without_rest_starts_from_zero_without_run_in",),
+    ),
+    Mutation(
+        "run-in only at rest",
+        "sysid_nn/_estimators/_base.py",
+        'lead = _RUN_IN if start != "zero" else 0',
+        'lead = _RUN_IN if start == "rest" else 0',
+        (f"{POLICY}::test_a_model_without_rest_starts_from_zero_without_run_in",),
+    ),
+    Mutation(
+        "cycle: a decay too",
+        "sysid_nn/_engine/_state_estimation.py",
+        "np.abs(last.min(axis=0) - lo) <= _CYCLE_TOL * width",
+        "last.min(axis=0) >= lo - _CYCLE_TOL * width",
+        (
+            "tests/test_engine.py::test_a_model_on_a_sustained_cycle_starts_after_the_run_in",
+        ),
+    ),
+    Mutation(
+        "cycle: outside the range",
+        "sysid_nn/_engine/_state_estimation.py",
+        "return bool(np.all(same & inside))",
+        "return bool(np.all(same))",
+        (
+            "tests/test_engine.py::test_a_model_on_a_sustained_cycle_starts_after_the_run_in",
+        ),
+    ),
+    Mutation(
+        "cycle: one output enough",
+        "sysid_nn/_engine/_state_estimation.py",
+        "return bool(np.all(same & inside))",
+        "return bool(np.any(same & inside))",
+        (
+            "tests/test_engine.py::test_a_model_on_a_sustained_cycle_starts_after_the_run_in",
+        ),
+    ),
+    Mutation(
+        "export: a cycle is a rest",
+        "sysid_nn/_export.py",
+        "at_rest = bool(leads[0]) and est.rest_output_ is not None",
+        "at_rest = bool(leads[0])",
+        ("tests/test_export.py::test_dlti_warns_without_a_rest",),
     ),
     Mutation(
         "short-record order always",

@@ -41,7 +41,8 @@ class _StepMap:
     ``layers`` are the perceptron's ``(W, b)``, ``bypass`` its linear bypass
     (or None); ``rest`` the state :meth:`simulate` starts from (standardised),
     ``at_rest`` whether that is the model's rest (else the zero-output start
-    of a model without one).
+    of a model without one, or a point of the cycle a self-oscillating model
+    settles on).
     """
 
     Mzs: np.ndarray
@@ -155,13 +156,15 @@ def _step_map(est) -> _StepMap:
         est._x_mean, est._x_scale, est._y_mean, est._y_scale, start, False,
     )  # fmt: skip
     # simulate's run-in: zero excitation (in the user's units) brings the
-    # model to rest before the first sample; a model without a rest has none.
+    # model to rest (or onto its cycle) before the first sample; a model
+    # without either has none.
     _, leads = est._from_rest([np.zeros((0, est.n_features_in_))], True)
     u0 = -est._x_mean / est._x_scale
     s = start
     for _ in range(int(leads[0])):
         s, _ = step.step(s, u0)
-    return _StepMap(**{**step.__dict__, "rest": s, "at_rest": bool(leads[0])})
+    at_rest = bool(leads[0]) and est.rest_output_ is not None
+    return _StepMap(**{**step.__dict__, "rest": s, "at_rest": at_rest})
 
 
 # -------------------------------------------------------------------- dlti
@@ -198,8 +201,8 @@ def to_dlti(estimator: Any, *, dt: float | None = None):
     -----
     UserWarning
         The model has no rest (``rest_output_`` is None): it is linearised
-        at the zero-output start of its free run, which is not an
-        equilibrium.
+        where its free run starts (zero output, or a point of the cycle it
+        self-oscillates on), which is not an equilibrium.
 
     See Also
     --------
@@ -228,8 +231,9 @@ def to_dlti(estimator: Any, *, dt: float | None = None):
     if not step.at_rest:
         warnings.warn(
             f"This {type(estimator).__name__} has no rest (rest_output_ is None): "
-            "it is linearised at the zero-output start of its free run, which "
-            "is not an equilibrium.",
+            "it is linearised where its free run starts (zero output, or a "
+            "point of the cycle it self-oscillates on; rest_check_.start), "
+            "which is not an equilibrium.",
             UserWarning,
             stacklevel=2,
         )

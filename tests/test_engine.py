@@ -28,7 +28,7 @@ from sysid_nn import (
     ISSMRegressor,
     TDLRegressor,
 )
-from sysid_nn._engine._state_estimation import _RUN_IN, rest_check
+from sysid_nn._engine._state_estimation import _RUN_IN, _SETTLED_TAIL, rest_check
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / "sysid_nn"
 
@@ -604,6 +604,37 @@ def test_a_model_that_does_not_settle_in_range_has_no_rest():
     moving = rest_check(runs(drifting), 2, y_range)
     assert moving.change[0] == pytest.approx(2047 / (_RUN_IN - 1))
     assert np.isinf(rest_check(runs(settled, diverged=True), 2, y_range).change[0])
+
+
+def test_a_model_on_a_sustained_cycle_starts_after_the_run_in():
+    t = np.arange(_RUN_IN)[:, None]
+    cycle = 0.5 + 0.1 * np.sin(0.3 * t)
+
+    def run(Y):
+        return lambda X: (Y, False)
+
+    y_range = (-2.0, 2.0)
+    check = rest_check(run(cycle), 2, y_range)
+    assert (check.start, check.output) == ("cycle", None)
+    assert "sustained cycle" in check.reason
+    np.testing.assert_allclose(check.end, cycle[-1])
+    # Decaying by a quarter over a window, drifting by 15 % of the width over
+    # it, or reaching outside the training outputs: from zero.
+    decaying = 0.5 + 0.1 * np.exp(-1.5e-4 * t) * np.sin(0.3 * t)
+    wave = np.sin(0.3 * t)  # its troughs alone decaying: each edge is judged
+    one_sided = 0.5 + 0.1 * np.where(wave < 0, 1.0 - t / _RUN_IN, 1.0) * wave
+    drifting = cycle + 0.03 * t / _SETTLED_TAIL
+    for Y in (decaying, one_sided, drifting, 20.0 * cycle):
+        check = rest_check(run(Y), 2, y_range)
+        assert (check.start, check.output) == ("zero", None)
+        assert "still moving" in check.reason
+    # Within the tolerance: decaying by 4 % over a window (each edge moves
+    # by a fifth of the tolerance).
+    slow = 0.5 + 0.1 * np.exp(-2e-5 * t) * np.sin(0.3 * t)
+    assert rest_check(run(slow), 2, y_range).start == "cycle"
+    # Every output must be on its cycle.
+    both = np.column_stack([cycle[:, 0], drifting[:, 0]])
+    assert rest_check(run(both), 2, (np.full(2, -2.0), np.full(2, 2.0))).start == "zero"
 
 
 # ------------------------------------------------------ observable weights

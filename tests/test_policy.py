@@ -337,5 +337,8 @@ def test_a_model_without_rest_starts_from_zero_without_run_in():
     at_rest = model.simulate(X[2])
     from_zero = model.simulate(X[2], **zero)
     assert np.max(np.abs(at_rest - from_zero)[:5]) > 0.2
-    model.rest_output_ = None  # as a model that never settles has
+    model.rest_check_.start = "zero"  # as a model that never settles has
     np.testing.assert_array_equal(model.simulate(X[2]), from_zero)
+    # A model on a cycle starts after the run-in, as one at rest.
+    model.rest_check_.start = "cycle"
+    np.testing.assert_array_equal(model.simulate(X[2]), at_rest)

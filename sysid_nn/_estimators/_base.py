@@ -736,18 +736,19 @@ class _RecurrentRegressorBase(
         """The sequences preceded by the run-in that brings the model to rest.
 
         Only when ``at_rest`` (no initial conditions given) and the model
-        has a rest (see :func:`~sysid_nn._engine._state_estimation.rest_check`:
-        ``rest_output_`` for the fitted weights, found again for weights
+        starts at its rest or on its cycle (see
+        :func:`~sysid_nn._engine._state_estimation.rest_check`:
+        ``rest_check_`` for the fitted weights, found again for weights
         changed since). The run-in is run with each sequence, not replaced
         by its end state, so that the weights' uncertainty reaches the rest
         too. Returns the sequences and the run-in length of each.
         """
         # (Models fitted before the range was kept have no rest: from zero.)
-        rest = None
+        start = "zero"
         if at_rest and hasattr(self, "_y_range"):
             fitted = np.array_equal(self.coefs_, self._rest_weights)
-            rest = self.rest_output_ if fitted else self._rest_check().output
-        lead = _RUN_IN if rest is not None else 0
+            start = (self.rest_check_ if fitted else self._rest_check()).start
+        lead = _RUN_IN if start != "zero" else 0
         Xs = [np.concatenate([np.zeros((lead, Xi.shape[1])), Xi]) for Xi in Xs]
         return Xs, np.full(len(Xs), lead, dtype=np.int64)
 

@@ -240,11 +240,14 @@ rest_output_ : ndarray of shape (n_outputs,) or None
     excitation (after 8192 samples of it; user units): free runs without
     initial conditions start there. None where the model does not settle
     (an integrating or self-oscillating one) or settles outside the range
-    of the training outputs; free runs then start from zero.
+    of the training outputs; free runs then start from zero, or, for a
+    model on a sustained cycle within that range, after the run-in, on its
+    cycle (``rest_check_.start == "cycle"``).
 rest_check_ : Bunch
-    The evidence behind ``rest_output_`` (user units): ``start`` (``"rest"``
-    or ``"zero"``), ``reason`` (one sentence: settled within or outside the
-    training outputs' range, still moving, or diverged), ``end`` (the output
+    The evidence behind ``rest_output_`` (user units): ``start`` (``"rest"``,
+    ``"cycle"`` or ``"zero"``), ``reason`` (one sentence: settled within or
+    outside the training outputs' range, on a sustained cycle within it,
+    still moving, or diverged), ``end`` (the output
     after the run-in), ``change`` (its largest change over the run-in's last
     2048 samples) against ``tolerance``, ``training_range`` (lowest and
     highest training output) and ``run_in`` (the run-in's length).
