@@ -246,7 +246,7 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     width) has no rest, but the end of the run-in is a state it keeps
     returning to, and free runs start there (``"cycle"``). From zero, such
     a model starts with its own transient: a Silverbox ISSM circling 1.4 mV
-    wide tested at 16.7 mV on the arrow from zero and 0.6 mV after the
+    wide tested at 16.7 mV on the arrow from zero and 0.68 mV after the
     run-in. A drifting model (an integrator's) moves its band by its width
     and a settling one narrows it: both still start from zero.
 
