@@ -150,8 +150,8 @@ MUTATIONS = (
     Mutation(
         "cycle: outside the range",
         "sysid_nn/_engine/_state_estimation.py",
-        "return bool(np.all(same & inside))",
-        "return bool(np.all(same))",
+        "if cycling and inside:",
+        "if cycling:",
         (
             "tests/test_engine.py::test_a_model_on_a_sustained_cycle_starts_after_the_run_in",
         ),
@@ -159,10 +159,30 @@ MUTATIONS = (
     Mutation(
         "cycle: one output enough",
         "sysid_nn/_engine/_state_estimation.py",
-        "return bool(np.all(same & inside))",
-        "return bool(np.any(same & inside))",
+        "return bool(np.all(same))",
+        "return bool(np.any(same))",
         (
             "tests/test_engine.py::test_a_model_on_a_sustained_cycle_starts_after_the_run_in",
+        ),
+    ),
+    Mutation(
+        "self-oscillating restarts kept",
+        "sysid_nn/_engine/_selection.py",
+        "        and not c\n",
+        "",
+        (
+            "tests/test_selection.py"
+            "::test_restart_that_self_oscillates_is_held_out_before_one_that_settles",
+        ),
+    ),
+    Mutation(
+        "self-oscillating restarts alike where none is bounded",
+        "sysid_nn/_engine/_selection.py",
+        "or [r for r, c in zip(runs, cycling, strict=True) if not c]",
+        "or []",
+        (
+            "tests/test_selection.py"
+            "::test_restart_that_self_oscillates_is_held_out_before_one_that_settles",
         ),
     ),
     Mutation(

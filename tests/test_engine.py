@@ -615,19 +615,23 @@ def test_a_model_on_a_sustained_cycle_starts_after_the_run_in():
 
     y_range = (-2.0, 2.0)
     check = rest_check(run(cycle), 2, y_range)
-    assert (check.start, check.output) == ("cycle", None)
-    assert "sustained cycle" in check.reason
+    assert (check.start, check.output, check.cycling) == ("cycle", None, True)
+    assert "sustained cycle within" in check.reason
     np.testing.assert_allclose(check.end, cycle[-1])
     # Decaying by a quarter over a window, drifting by 15 % of the width over
-    # it, or reaching outside the training outputs: from zero.
+    # it: no cycle, from zero.
     decaying = 0.5 + 0.1 * np.exp(-1.5e-4 * t) * np.sin(0.3 * t)
     wave = np.sin(0.3 * t)  # its troughs alone decaying: each edge is judged
     one_sided = 0.5 + 0.1 * np.where(wave < 0, 1.0 - t / _RUN_IN, 1.0) * wave
     drifting = cycle + 0.03 * t / _SETTLED_TAIL
-    for Y in (decaying, one_sided, drifting, 20.0 * cycle):
+    for Y in (decaying, one_sided, drifting):
         check = rest_check(run(Y), 2, y_range)
-        assert (check.start, check.output) == ("zero", None)
+        assert (check.start, check.output, check.cycling) == ("zero", None, False)
         assert "still moving" in check.reason
+    # A cycle reaching outside the training outputs: from zero, but cycling.
+    check = rest_check(run(20.0 * cycle), 2, y_range)
+    assert (check.start, check.output, check.cycling) == ("zero", None, True)
+    assert "sustained cycle beyond" in check.reason
     # Within the tolerance: decaying by 4 % over a window (each edge moves
     # by a fifth of the tolerance).
     slow = 0.5 + 0.1 * np.exp(-2e-5 * t) * np.sin(0.3 * t)

@@ -110,10 +110,19 @@ def test_dlti_of_a_network_is_its_small_amplitude_response(fitted_models, kind):
 
 
 def test_dlti_warns_without_a_rest(fitted_models):
-    est, _, _ = fitted_models["issm", 1]
-    assert est.rest_output_ is None  # this small fit does not settle
-    with pytest.warns(UserWarning, match="no rest"):
+    import copy
+
+    est = copy.deepcopy(fitted_models["issm", 1][0])
+    assert est.rest_check_.start == "rest"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         to_dlti(est)
+    # As a model that does not settle has it: from zero, or on its cycle.
+    est.rest_output_ = None
+    for start in ("zero", "cycle"):
+        est.rest_check_.start = start
+        with pytest.warns(UserWarning, match="no rest"):
+            to_dlti(est)
 
 
 def test_export_needs_a_fitted_estimator_and_onnx(fitted_models, tmp_path, monkeypatch):

@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sysid_nn._engine._state_estimation import _segments
+from sysid_nn._engine._state_estimation import _segments, rest_check, zero_start_run
 from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._records._data import _FREE_RUN, _Data
 from sysid_nn._statistics import loss_differential_statistic
@@ -680,6 +680,27 @@ def _swing(y: np.ndarray) -> float:
     return float(np.abs(np.diff(y, 2, axis=0)).max()) if len(y) > 2 else 0.0
 
 
+def self_oscillating(est, runs: list, train) -> list[bool]:
+    """Whether each run's free run under zero excitation ends on a sustained
+    cycle (:func:`~sysid_nn._engine._state_estimation.rest_check`'s
+    ``cycling``; False where the run diverged or its criterion is not finite).
+
+    A structure driven by its excitation comes to rest without it; a
+    restart that keeps oscillating on its own has learnt a limit cycle the
+    records do not show. On Silverbox with the validation part moved 10
+    samples earlier, one fit chose such a restart (25 mV wide under zero
+    excitation; 6.1 mV on the full arrow) over one validated 5 % worse that
+    comes to rest and tested at 0.78 mV.
+    """
+    modelled = train.Y[train.modelled]
+    y_range = (modelled.min(axis=0), modelled.max(axis=0))
+    return [
+        bool(np.isfinite(r.criterion))
+        and rest_check(zero_start_run(est, r.w), est.n_features_in_, y_range).cycling
+        for r in runs
+    ]
+
+
 def excursion_ratios(est, runs: list, train, linear) -> np.ndarray:
     """Each run's constant-input implausibility (at most 1 passes).
 
@@ -722,7 +743,7 @@ def choose(
     refined: int | None = None,
 ):
     """The run ``fit`` keeps, what it is and the evidence: ``(run,
-    "restart" | "linear", bounded, excursions, advantage)``, a flag and a
+    "restart" | "linear", bounded, excursions, cycling, advantage)``, a flag and a
     ratio per run, and how many standard errors the best restart validated
     better than the refinement where the two were compared (None where not).
 
@@ -745,14 +766,22 @@ def choose(
     loss of its closed-form fits, the runs ``closed_form`` indexes.
     """
     excursions = excursion_ratios(est, runs, train, linear)
+    cycling = self_oscillating(est, runs, train)
     like = surrogate_bounds(est, train, linear)
     bounded = [
         np.isfinite(r.criterion)
         and bool(x <= 1.0)
+        and not c
         and bounded_beyond_range(est, r.w, train, like)
-        for r, x in zip(runs, excursions, strict=True)
+        for r, x, c in zip(runs, excursions, cycling, strict=True)
     ]
-    pool = [r for r, ok in zip(runs, bounded, strict=True) if ok] or runs
+    # Where none passes, those that come to rest (or drift) before those
+    # that self-oscillate.
+    pool = (
+        [r for r, ok in zip(runs, bounded, strict=True) if ok]
+        or [r for r, c in zip(runs, cycling, strict=True) if not c]
+        or runs
+    )
     if linear is None:
         if val is not None and closed_form:
             # A linear model fits its training records no worse than its
@@ -760,7 +789,7 @@ def choose(
             reference = min(runs[k].loss for k in closed_form)
             pool = fitting_no_worse(pool, reference) or pool
         best = min(pool, key=lambda r: r.criterion)
-        return best, "restart", bounded, excursions, None
+        return best, "restart", bounded, excursions, cycling, None
     lin = linear.run
     # ``loss``: the final objective on the training records (the free run
     # where the focus is simulation), alike for both.
@@ -784,20 +813,36 @@ def choose(
     if best is not None and (
         best.criterion < lin.criterion or not np.isfinite(lin.criterion)
     ):
-        return best, "restart", bounded, excursions, advantage
+        return best, "restart", bounded, excursions, cycling, advantage
     # Ties within rounding: runs that never left the linear model (the
     # refinement of the linear model that found no better weights), or
     # exact fits alike.
     tie = _TIE * (1.0 + lin.criterion)
     left = [r for r in fitting if r.criterion - lin.criterion > tie]
+    # Restarts held out for self-oscillating left it too: worth a warning.
+    left = left or [r for r, c in zip(runs, cycling, strict=True) if c]
     if best is not None and not left:
         # No run left the linear model: nothing to warn about.
-        return replace(lin, w=linear.w), "linear", bounded, excursions, advantage
+        return (
+            replace(lin, w=linear.w),
+            "linear",
+            bounded,
+            excursions,
+            cycling,
+            advantage,
+        )
     if left:
         best = min(left, key=lambda r: r.criterion)
     if retry and not fits_better(runs, bounded, linear):
         # Training stopped short: the caller runs more restarts first.
-        return replace(lin, w=linear.w), "linear", bounded, excursions, advantage
+        return (
+            replace(lin, w=linear.w),
+            "linear",
+            bounded,
+            excursions,
+            cycling,
+            advantage,
+        )
     if best is None:
         what = (
             f"no trained network fitted the training records better (the "
@@ -818,8 +863,9 @@ def choose(
             f"; {len(runs) - sum(bounded)} of {len(runs)} networks diverged at "
             f"{_AMPLITUDE_MARGIN:g} times the training amplitude, left "
             f"{_AMPLITUDE_MARGIN:g} times the training outputs' reach under "
-            "excitations like the training records' or settled far outside "
-            "them under a constant input"
+            "excitations like the training records', settled far outside "
+            "them under a constant input or self-oscillated under zero "
+            f"excitation ({sum(cycling)}; restart_self_oscillating_)"
             if not all(bounded)
             else ""
         )
@@ -834,4 +880,4 @@ def choose(
         UserWarning,
         stacklevel=user_stacklevel(),
     )
-    return replace(lin, w=linear.w), "linear", bounded, excursions, advantage
+    return replace(lin, w=linear.w), "linear", bounded, excursions, cycling, advantage

@@ -22,6 +22,7 @@ from sklearn.utils import Bunch
 
 from sysid_nn._engine import _least_squares as least_squares
 from sysid_nn._engine._least_squares import with_intercept
+from sysid_nn._records._data import _FREE_RUN
 
 #: Output and input lags of the linear one-step model whose residuals give
 #: the noise level.
@@ -257,8 +258,9 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     None), ``start`` (``"rest"``, ``"cycle"`` or ``"zero"``), ``reason``
     (one sentence), ``end`` (the output at the end of the run-in; NaN where
     it diverged), ``change`` (per output, the largest distance from ``end``
-    over the run-in's last ``_SETTLED_TAIL`` samples; inf where it diverged)
-    and ``diverged``.
+    over the run-in's last ``_SETTLED_TAIL`` samples; inf where it
+    diverged), ``diverged`` and ``cycling`` (on a sustained cycle, within
+    ``y_range`` or not).
 
     Examples
     --------
@@ -279,16 +281,25 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     with np.errstate(invalid="ignore"):
         change = np.max(np.abs(tail - end), axis=0)
     diverged = bool(diverged) or not np.all(np.isfinite(tail))
-    start = "zero"
+    start, cycling = "zero", False
     if diverged:
         end, change = np.full_like(end, np.nan), np.full_like(end, np.inf)
         reason = "the run-in under zero excitation diverged"
     elif not np.all(change <= _SETTLED_TOL):
         reason = f"still moving over the last {_SETTLED_TAIL} samples of the run-in"
-        if _on_cycle(Y[-2 * _SETTLED_TAIL : -_SETTLED_TAIL], tail, y_range):
+        cycling = _on_cycle(Y[-2 * _SETTLED_TAIL : -_SETTLED_TAIL], tail)
+        inside = np.all(
+            (y_range[0] <= tail.min(axis=0)) & (tail.max(axis=0) <= y_range[1])
+        )
+        if cycling and inside:
             start = "cycle"
             reason = (
                 f"on a sustained cycle within the range of the training outputs "
+                f"over the last {2 * _SETTLED_TAIL} samples of the run-in"
+            )
+        elif cycling:
+            reason = (
+                f"on a sustained cycle beyond the range of the training outputs "
                 f"over the last {2 * _SETTLED_TAIL} samples of the run-in"
             )
     elif not np.all((y_range[0] <= end) & (end <= y_range[1])):
@@ -302,20 +313,33 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
         end=end,
         change=change,
         diverged=diverged,
+        cycling=cycling,
     )
 
 
-def _on_cycle(before: np.ndarray, last: np.ndarray, y_range) -> bool:
-    """Whether two windows of a run cover the same band within ``y_range``.
+def zero_start_run(est, w: np.ndarray):
+    """``free_run(X)`` of :func:`rest_check` for ``est`` with the weights
+    ``w``: the standardised free run of one sequence ``X`` (user units) from
+    zero initial conditions, and whether it diverged."""
+
+    def free_run(X):
+        data = est._stack([X], None)
+        Yhat, _, diverged, _ = est._run(w, data, _FREE_RUN, False, keep_state=False)
+        return Yhat[data.h :], bool(diverged[0] >= 0)
+
+    return free_run
+
+
+def _on_cycle(before: np.ndarray, last: np.ndarray) -> bool:
+    """Whether two windows of a run cover the same band.
 
     Per output, each edge of the band of ``last`` lies within ``_CYCLE_TOL``
-    of the width of the band of ``before`` from its edge, and the band lies
-    within ``y_range``: a sustained cycle, neither drifting nor decaying.
+    of the width of the band of ``before`` from its edge: a sustained
+    cycle, neither drifting nor decaying.
     """
     lo, hi = before.min(axis=0), before.max(axis=0)
     width = hi - lo
     same = (np.abs(last.min(axis=0) - lo) <= _CYCLE_TOL * width) & (
         np.abs(last.max(axis=0) - hi) <= _CYCLE_TOL * width
     )
-    inside = (y_range[0] <= last.min(axis=0)) & (last.max(axis=0) <= y_range[1])
-    return bool(np.all(same & inside))
+    return bool(np.all(same))

@@ -235,6 +235,9 @@ class Training:
     #: Per run, its constant-input excursion over its bound (see
     #: :func:`sysid_nn._engine._selection.excursion_ratios`).
     excursions: np.ndarray | None = None
+    #: Per run, whether it self-oscillates under zero excitation (see
+    #: :func:`sysid_nn._engine._selection.self_oscillating`).
+    self_oscillating: list = field(default_factory=list)
     #: The index of the run that refined the linear model (None without one;
     #: see :func:`refine_linear`).
     refined: int | None = None
@@ -304,8 +307,10 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     batches = 1
     while True:
         retry = batches <= _EXTRA_BATCHES and linear is not None
-        best, chosen, selected, bounded, excursions, advantage = choose_restart(
-            est, train_data, val, runs, linear, closed_form, retry, refined
+        best, chosen, selected, bounded, excursions, cycling, advantage = (
+            choose_restart(
+                est, train_data, val, runs, linear, closed_form, retry, refined
+            )
         )
         if (
             not retry
@@ -338,6 +343,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         chosen_run=chosen,
         bounded=bounded,
         excursions=excursions,
+        self_oscillating=cycling,
         refined=refined,
         refinement_advantage=advantage,
         closed_form=closed_form,
@@ -407,9 +413,11 @@ def choose_restart(
     refined: int | None = None,
 ):
     """The run whose weights ``fit`` returns: ``(index, run, selected,
-    bounded, excursions, advantage)``, ``bounded`` whether each run's free
-    run stays bounded, ``excursions`` its constant-input excursion over its
-    bound, ``advantage`` the best restart's over the refinement (or None).
+    bounded, excursions, cycling, advantage)``, ``bounded`` whether each
+    run's free run stays bounded, ``excursions`` its constant-input
+    excursion over its bound, ``cycling`` whether it self-oscillates under
+    zero excitation, ``advantage`` the best restart's over the refinement
+    (or None).
 
     Among the restarts whose free run stays bounded beyond the training
     range, the one with the lowest criterion (the validation loss of its
@@ -418,11 +426,11 @@ def choose_restart(
     it beats the linear model; else the linear model (``index`` None,
     ``selected`` ``"linear"``). See :func:`sysid_nn._engine._selection.choose`.
     """
-    chosen, selected, bounded, excursions, advantage = _selection.choose(
+    chosen, selected, bounded, excursions, cycling, advantage = _selection.choose(
         est, train_data, val, runs, linear, closed_form, retry, refined
     )
     index = next((k for k, r in enumerate(runs) if r is chosen), None)
-    return index, chosen, selected, bounded, excursions, advantage
+    return index, chosen, selected, bounded, excursions, cycling, advantage
 
 
 def fallback(est, w: np.ndarray, train_data: _Data, val: _Data | None):

@@ -54,6 +54,7 @@ from sysid_nn._engine._state_estimation import (
     _SETTLED_TOL,
     fit_initial_condition,
     rest_check,
+    zero_start_run,
 )
 from sysid_nn._engine._training import (
     _REFINE_BUDGET,
@@ -467,6 +468,7 @@ class _RecurrentRegressorBase(
         self.restart_losses_ = np.array([r.loss for r in result.runs])
         self.restart_bounded_ = np.array(result.bounded, dtype=bool)
         self.restart_excursions_ = np.asarray(result.excursions, dtype=float)
+        self.restart_self_oscillating_ = np.array(result.self_oscillating, dtype=bool)
         self.n_restarts_ = len(result.runs)
         self.restart_batches_ = result.batches
         self.best_restart_ = result.chosen
@@ -755,17 +757,13 @@ class _RecurrentRegressorBase(
     def _rest_check(self) -> Bunch:
         """:func:`~sysid_nn._engine._state_estimation.rest_check` of the current
         weights, in the user's units (``rest_check_``)."""
-
-        def free_run(X):
-            data = self._stack([X], None)
-            Yhat, _, diverged = self._free_run(data, None)
-            return Yhat[data.h :], bool(diverged[0] >= 0)
-
-        check = rest_check(free_run, self.n_features_in_, self._y_range)
+        run = zero_start_run(self, self.coefs_)
+        check = rest_check(run, self.n_features_in_, self._y_range)
         mean, scale = self._y_mean, self._y_scale
         return Bunch(
             start=check.start,
             reason=check.reason,
+            cycling=check.cycling,
             output=None if check.output is None else check.output * scale + mean,
             end=check.end * scale + mean,
             change=check.change * scale,

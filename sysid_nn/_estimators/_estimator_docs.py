@@ -116,8 +116,10 @@ restart_bounded_ : ndarray of bool
     twice the larger of that value and the linear model's reach under two
     excitations like the training records' (their Fourier phases drawn
     anew from a fixed seed, spectrum and range kept), and passes the
-    constant-input check (``restart_excursions_`` at most 1); the others
-    are candidates only where none passes.
+    constant-input check (``restart_excursions_`` at most 1), and does not
+    self-oscillate (``restart_self_oscillating_``); the others are
+    candidates only where none passes, those that do not self-oscillate
+    first.
 restart_excursions_ : ndarray
     Each restart's constant-input check: its free runs from rest under
     constant inputs at the minimum, quartiles and maximum of the training
@@ -128,6 +130,13 @@ restart_excursions_ : ndarray
     times the larger of the training outputs' largest and the linear
     model's. Runs that diverge or have not settled count 0. Above 1 holds
     the restart out (``restart_bounded_``).
+restart_self_oscillating_ : ndarray of bool
+    Whether each restart's free run under zero excitation, from zero over
+    the 8192 samples of the run-in (as ``rest_check_``), ends on a
+    sustained cycle: the band its output covers over the last 2048 samples
+    is the band of the 2048 before, each edge within a tenth of the band's
+    width (a drift moves the band, a decay narrows it). Such a restart is
+    held out (``restart_bounded_``).
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
 restart_batches_ : int
@@ -247,7 +256,8 @@ rest_check_ : Bunch
     The evidence behind ``rest_output_`` (user units): ``start`` (``"rest"``,
     ``"cycle"`` or ``"zero"``), ``reason`` (one sentence: settled within or
     outside the training outputs' range, on a sustained cycle within it,
-    still moving, or diverged), ``end`` (the output
+    still moving, or diverged), ``cycling`` (on a sustained cycle, within
+    that range or beyond it: the model self-oscillates), ``end`` (the output
     after the run-in), ``change`` (its largest change over the run-in's last
     2048 samples) against ``tolerance``, ``training_range`` (lowest and
     highest training output) and ``run_in`` (the run-in's length).

@@ -639,6 +639,8 @@ default=None
                 "restart_scores_",
                 "restart_losses_",
                 "restart_bounded_",
+                "restart_excursions_",
+                "restart_self_oscillating_",
                 "n_restarts_",
                 "best_restart_",
                 "refined_restart_",
