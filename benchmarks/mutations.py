@@ -186,6 +186,16 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "self-oscillating under zero excitation",
+        "sysid_nn/_engine/_selection.py",
+        "level = median * est._x_scale + est._x_mean",
+        "level = 0.0",
+        (
+            "tests/test_selection.py"
+            "::test_the_choice_among_restarts_is_explained_by_fitted_attributes",
+        ),
+    ),
+    Mutation(
         "export: a cycle is a rest",
         "sysid_nn/_export.py",
         "at_rest = bool(leads[0]) and est.rest_output_ is not None",

@@ -317,13 +317,14 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     )
 
 
-def zero_start_run(est, w: np.ndarray):
+def zero_start_run(est, w: np.ndarray, level=0.0):
     """``free_run(X)`` of :func:`rest_check` for ``est`` with the weights
-    ``w``: the standardised free run of one sequence ``X`` (user units) from
-    zero initial conditions, and whether it diverged."""
+    ``w``: the standardised free run of one sequence ``X`` (user units),
+    shifted by the excitation ``level``, from zero initial conditions, and
+    whether it diverged."""
 
     def free_run(X):
-        data = est._stack([X], None)
+        data = est._stack([X + level], None)
         Yhat, _, diverged, _ = est._run(w, data, _FREE_RUN, False, keep_state=False)
         return Yhat[data.h :], bool(diverged[0] >= 0)
 
