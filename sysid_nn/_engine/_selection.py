@@ -759,8 +759,9 @@ def choose(
     wild under excitations like the training records'
     (:func:`bounded_beyond_range`, :func:`surrogate_bounds`), or whose
     free runs under constant inputs within it settle far out on the wrong
-    side or keep swinging (:func:`excursion_ratios` above 1), are
-    disqualified (unless all are), and with validation
+    side or keep swinging (:func:`excursion_ratios` above 1), or which
+    self-oscillate (:func:`self_oscillating`), are disqualified (unless all
+    are: then those that do not self-oscillate first), and with validation
     records those whose training loss is above the linear model's; the best
     remaining one is kept if its criterion beats the linear model's
     (validation loss, or training loss without validation), else the linear
@@ -872,8 +873,8 @@ def choose(
             f"{_AMPLITUDE_MARGIN:g} times the training amplitude, left "
             f"{_AMPLITUDE_MARGIN:g} times the training outputs' reach under "
             "excitations like the training records', settled far outside "
-            "them under a constant input or self-oscillated under zero "
-            f"excitation ({sum(cycling)}; restart_self_oscillating_)"
+            "them under a constant input or self-oscillated under one "
+            f"({sum(cycling)}; restart_self_oscillating_)"
             if not all(bounded)
             else ""
         )

@@ -131,12 +131,13 @@ restart_excursions_ : ndarray
     model's. Runs that diverge or have not settled count 0. Above 1 holds
     the restart out (``restart_bounded_``).
 restart_self_oscillating_ : ndarray of bool
-    Whether each restart's free run under zero excitation, from zero over
-    the 8192 samples of the run-in (as ``rest_check_``), ends on a
-    sustained cycle: the band its output covers over the last 2048 samples
-    is the band of the 2048 before, each edge within a tenth of the band's
-    width (a drift moves the band, a decay narrows it). Such a restart is
-    held out (``restart_bounded_``).
+    Whether each restart's free run from zero under the training
+    excitation's median held constant ends, after 8192 samples, on a
+    sustained cycle (as ``rest_check_.cycling`` under zero excitation): the
+    band its output covers over the last 2048 samples is the band of the
+    2048 before, each edge within a tenth of the band's width (a drift moves
+    the band, a decay narrows it). Such a restart is held out
+    (``restart_bounded_``).
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
 restart_batches_ : int
