@@ -166,23 +166,13 @@ MUTATIONS = (
         ),
     ),
     Mutation(
-        "self-oscillating restarts kept",
-        "sysid_nn/_engine/_selection.py",
-        "        and not c\n",
-        "",
-        (
-            "tests/test_selection.py"
-            "::test_restart_that_self_oscillates_is_held_out_before_one_that_settles",
-        ),
-    ),
-    Mutation(
         "self-oscillating restarts alike where none is bounded",
         "sysid_nn/_engine/_selection.py",
         "or [r for r, c in zip(runs, cycling, strict=True) if not c]",
         "or []",
         (
             "tests/test_selection.py"
-            "::test_restart_that_self_oscillates_is_held_out_before_one_that_settles",
+            "::test_restart_that_self_oscillates_comes_after_one_that_settles_where_none_passes",
         ),
     ),
     Mutation(

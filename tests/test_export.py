@@ -112,7 +112,7 @@ def test_dlti_of_a_network_is_its_small_amplitude_response(fitted_models, kind):
 def test_dlti_warns_without_a_rest(fitted_models):
     import copy
 
-    est = copy.deepcopy(fitted_models["issm", 1][0])
+    est = copy.deepcopy(fitted_models["issm", 2][0])
     assert est.rest_check_.start == "rest"
     with warnings.catch_warnings():
         warnings.simplefilter("error")

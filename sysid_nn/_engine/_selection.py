@@ -759,9 +759,9 @@ def choose(
     wild under excitations like the training records'
     (:func:`bounded_beyond_range`, :func:`surrogate_bounds`), or whose
     free runs under constant inputs within it settle far out on the wrong
-    side or keep swinging (:func:`excursion_ratios` above 1), or which
-    self-oscillate (:func:`self_oscillating`), are disqualified (unless all
-    are: then those that do not self-oscillate first), and with validation
+    side or keep swinging (:func:`excursion_ratios` above 1), are
+    disqualified (unless all are: then those that do not self-oscillate,
+    :func:`self_oscillating`, first), and with validation
     records those whose training loss is above the linear model's; the best
     remaining one is kept if its criterion beats the linear model's
     (validation loss, or training loss without validation), else the linear
@@ -780,12 +780,12 @@ def choose(
     bounded = [
         np.isfinite(r.criterion)
         and bool(x <= 1.0)
-        and not c
         and bounded_beyond_range(est, r.w, train, like)
-        for r, x, c in zip(runs, excursions, cycling, strict=True)
+        for r, x in zip(runs, excursions, strict=True)
     ]
     # Where none passes, those that come to rest (or drift) before those
-    # that self-oscillate.
+    # that self-oscillate. (Holding those out where others pass took the
+    # oscillator's TDL at dt = 0.03 s from 0.43 to 1.09 NRMSE.)
     pool = (
         [r for r, ok in zip(runs, bounded, strict=True) if ok]
         or [r for r, c in zip(runs, cycling, strict=True) if not c]
@@ -828,8 +828,6 @@ def choose(
     # exact fits alike.
     tie = _TIE * (1.0 + lin.criterion)
     left = [r for r in fitting if r.criterion - lin.criterion > tie]
-    # Restarts held out for self-oscillating left it too: worth a warning.
-    left = left or [r for r, c in zip(runs, cycling, strict=True) if c]
     if best is not None and not left:
         # No run left the linear model: nothing to warn about.
         return (
@@ -873,8 +871,7 @@ def choose(
             f"{_AMPLITUDE_MARGIN:g} times the training amplitude, left "
             f"{_AMPLITUDE_MARGIN:g} times the training outputs' reach under "
             "excitations like the training records', settled far outside "
-            "them under a constant input or self-oscillated under one "
-            f"({sum(cycling)}; restart_self_oscillating_)"
+            "them under a constant input"
             if not all(bounded)
             else ""
         )

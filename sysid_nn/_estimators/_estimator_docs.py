@@ -116,10 +116,9 @@ restart_bounded_ : ndarray of bool
     twice the larger of that value and the linear model's reach under two
     excitations like the training records' (their Fourier phases drawn
     anew from a fixed seed, spectrum and range kept), and passes the
-    constant-input check (``restart_excursions_`` at most 1), and does not
-    self-oscillate (``restart_self_oscillating_``); the others are
-    candidates only where none passes, those that do not self-oscillate
-    first.
+    constant-input check (``restart_excursions_`` at most 1); the others
+    are candidates only where none passes, those that do not self-oscillate
+    (``restart_self_oscillating_``) first.
 restart_excursions_ : ndarray
     Each restart's constant-input check: its free runs from rest under
     constant inputs at the minimum, quartiles and maximum of the training
@@ -136,8 +135,9 @@ restart_self_oscillating_ : ndarray of bool
     sustained cycle (as ``rest_check_.cycling`` under zero excitation): the
     band its output covers over the last 2048 samples is the band of the
     2048 before, each edge within a tenth of the band's width (a drift moves
-    the band, a decay narrows it). Such a restart is held out
-    (``restart_bounded_``).
+    the band, a decay narrows it). Where no restart passes the bound checks
+    (``restart_bounded_``), those that do not self-oscillate are chosen
+    from first.
 n_restarts_ : int
     Restarts run (the length of ``restart_scores_``).
 restart_batches_ : int
