@@ -689,12 +689,12 @@ def self_oscillating(est, runs: list, train) -> list[bool]:
     A structure under a constant load comes to rest; a restart that keeps
     oscillating on its own has learnt a limit cycle the records do not
     show. On Silverbox with the validation part moved 10 samples earlier,
-    one fit chose such a restart (25 mV wide; 6.1 mV on the full arrow)
-    over one validated 5 % worse that comes to rest and tested at 0.78 mV.
-    The median, not zero: zero excitation can lie outside the training
-    excitation (Cascaded Tanks' pump), where a model's cycle is its
-    extrapolation (one ISSM fit cycled there and tested at 0.47 V, the
-    restart that replaced it at 0.71 V).
+    where no restart passed the bound checks, one fit chose such a restart
+    (25 mV wide; 6.1 mV on the full arrow) over one validated 5 % worse
+    that comes to rest and tests at 0.78 mV. The median, not zero: zero
+    excitation can lie outside the training excitation, where a cycle is
+    the model's extrapolation (a Cascaded Tanks ISSM restart that tested
+    at 0.47 V cycles at zero pump voltage and comes to rest at the median).
     """
     modelled = train.Y[train.modelled]
     y_range = (modelled.min(axis=0), modelled.max(axis=0))

@@ -235,8 +235,8 @@ class Training:
     #: Per run, its constant-input excursion over its bound (see
     #: :func:`sysid_nn._engine._selection.excursion_ratios`).
     excursions: np.ndarray | None = None
-    #: Per run, whether it self-oscillates under zero excitation (see
-    #: :func:`sysid_nn._engine._selection.self_oscillating`).
+    #: Per run, whether it self-oscillates under the median excitation held
+    #: (see :func:`sysid_nn._engine._selection.self_oscillating`).
     self_oscillating: list = field(default_factory=list)
     #: The index of the run that refined the linear model (None without one;
     #: see :func:`refine_linear`).
@@ -416,8 +416,8 @@ def choose_restart(
     bounded, excursions, cycling, advantage)``, ``bounded`` whether each
     run's free run stays bounded, ``excursions`` its constant-input
     excursion over its bound, ``cycling`` whether it self-oscillates under
-    zero excitation, ``advantage`` the best restart's over the refinement
-    (or None).
+    the median excitation held, ``advantage`` the best restart's over the
+    refinement (or None).
 
     Among the restarts whose free run stays bounded beyond the training
     range, the one with the lowest criterion (the validation loss of its
