@@ -828,28 +828,15 @@ def choose(
     # exact fits alike.
     tie = _TIE * (1.0 + lin.criterion)
     left = [r for r in fitting if r.criterion - lin.criterion > tie]
+    returned = replace(lin, w=linear.w), "linear", bounded, excursions, cycling
     if best is not None and not left:
         # No run left the linear model: nothing to warn about.
-        return (
-            replace(lin, w=linear.w),
-            "linear",
-            bounded,
-            excursions,
-            cycling,
-            advantage,
-        )
+        return *returned, advantage
     if left:
         best = min(left, key=lambda r: r.criterion)
     if retry and not fits_better(runs, bounded, linear):
         # Training stopped short: the caller runs more restarts first.
-        return (
-            replace(lin, w=linear.w),
-            "linear",
-            bounded,
-            excursions,
-            cycling,
-            advantage,
-        )
+        return *returned, advantage
     if best is None:
         what = (
             f"no trained network fitted the training records better (the "
@@ -886,4 +873,4 @@ def choose(
         UserWarning,
         stacklevel=user_stacklevel(),
     )
-    return replace(lin, w=linear.w), "linear", bounded, excursions, cycling, advantage
+    return *returned, advantage
