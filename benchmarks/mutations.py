@@ -188,8 +188,8 @@ MUTATIONS = (
     Mutation(
         "export: a cycle is a rest",
         "sysid_nn/_export.py",
-        "at_rest = bool(leads[0]) and est.rest_output_ is not None",
-        "at_rest = bool(leads[0])",
+        '"at_rest": kind == "rest"',
+        '"at_rest": kind != "zero"',
         ("tests/test_export.py::test_dlti_warns_without_a_rest",),
     ),
     Mutation(

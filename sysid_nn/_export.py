@@ -141,6 +141,7 @@ def _issm_matrices(est) -> tuple:
 def _step_map(est) -> _StepMap:
     """The step map of ``est`` and the state its free run starts from."""
     from sysid_nn._engine._layout import MLPLayout
+    from sysid_nn._engine._state_estimation import _RUN_IN
     from sysid_nn._estimators._tdl import TDLRegressor
     from sysid_nn._saved import check_network
 
@@ -158,13 +159,12 @@ def _step_map(est) -> _StepMap:
     # simulate's run-in: zero excitation (in the user's units) brings the
     # model to rest (or onto its cycle) before the first sample; a model
     # without either has none.
-    _, leads = est._from_rest([np.zeros((0, est.n_features_in_))], True)
+    kind = est._free_run_start()
     u0 = -est._x_mean / est._x_scale
     s = start
-    for _ in range(int(leads[0])):
+    for _ in range(_RUN_IN if kind != "zero" else 0):
         s, _ = step.step(s, u0)
-    at_rest = bool(leads[0]) and est.rest_output_ is not None
-    return _StepMap(**{**step.__dict__, "rest": s, "at_rest": at_rest})
+    return _StepMap(**{**step.__dict__, "rest": s, "at_rest": kind == "rest"})
 
 
 # -------------------------------------------------------------------- dlti

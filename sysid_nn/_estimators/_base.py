@@ -745,14 +745,19 @@ class _RecurrentRegressorBase(
         by its end state, so that the weights' uncertainty reaches the rest
         too. Returns the sequences and the run-in length of each.
         """
-        # (Models fitted before the range was kept have no rest: from zero.)
-        start = "zero"
-        if at_rest and hasattr(self, "_y_range"):
-            fitted = np.array_equal(self.coefs_, self._rest_weights)
-            start = (self.rest_check_ if fitted else self._rest_check()).start
+        start = self._free_run_start() if at_rest else "zero"
         lead = _RUN_IN if start != "zero" else 0
         Xs = [np.concatenate([np.zeros((lead, Xi.shape[1])), Xi]) for Xi in Xs]
         return Xs, np.full(len(Xs), lead, dtype=np.int64)
+
+    def _free_run_start(self) -> str:
+        """Where a free run without initial conditions starts: ``"rest"``,
+        ``"cycle"`` or ``"zero"`` (``rest_check_.start`` for the fitted
+        weights, found again for weights changed since)."""
+        if not hasattr(self, "_y_range"):
+            return "zero"  # fitted before the range was kept: no rest
+        fitted = np.array_equal(self.coefs_, self._rest_weights)
+        return (self.rest_check_ if fitted else self._rest_check()).start
 
     def _rest_check(self) -> Bunch:
         """:func:`~sysid_nn._engine._state_estimation.rest_check` of the current
