@@ -132,6 +132,63 @@ MUTATIONS = (
         (f"{POLICY}::test_a_model_without_rest_starts_from_zero_without_run_in",),
     ),
     Mutation(
+        "run-in from the zero state",
+        "sysid_nn/_estimators/_base.py",
+        "self._run_in_from = training_end(self, fitted)",
+        "self._run_in_from = None",
+        (
+            f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
+            "record_leads_to",
+        ),
+    ),
+    Mutation(
+        "run-in from the first record",
+        "sysid_nn/_engine/_state_estimation.py",
+        "s = int(np.argmax(np.diff(data.starts)))",
+        "s = 0",
+        (
+            f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
+            "record_leads_to",
+        ),
+    ),
+    Mutation(
+        "run-in from the training end without rest",
+        "sysid_nn/_engine/_state_estimation.py",
+        'from_training = led is not None and led.start != "zero"',
+        "from_training = led is not None",
+        (
+            f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
+            "record_leads_to",
+        ),
+    ),
+    Mutation(
+        "simulate's run-in from the zero state",
+        "sysid_nn/_estimators/_base.py",
+        "if lead and origin is not None:",
+        "if lead and origin is not None and not at_rest:",
+        (
+            f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
+            "record_leads_to",
+        ),
+    ),
+    Mutation(
+        "export: run-in from the zero state",
+        "sysid_nn/_export.py",
+        "Mzs, Mzu, Mss, Msu, Mso, Co, start = build(est, origin)",
+        "Mzs, Mzu, Mss, Msu, Mso, Co, start = build(est, None)",
+        (
+            f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
+            "record_leads_to",
+        ),
+    ),
+    Mutation(
+        "run-in: the unmeasured states from zero",
+        "sysid_nn/_estimators/_issm.py",
+        "x[self.n_outputs_ :]]",
+        "0.0 * x[self.n_outputs_ :]]",
+        (f"{POLICY}::test_the_run_in_starts_where_the_training_records_free_run_ends",),
+    ),
+    Mutation(
         "run-in only at rest",
         "sysid_nn/_estimators/_base.py",
         'lead = _RUN_IN if start != "zero" else 0',

@@ -90,7 +90,7 @@ def _shift(n_blocks: int, width: int) -> np.ndarray:
     return np.eye(n_blocks * width, k=-width)
 
 
-def _tdl_matrices(est) -> tuple:
+def _tdl_matrices(est, origin) -> tuple:
     """TDL: ``s = [y(t-1) .. y(t-na), u(t-1) .. u(t-L)]``, ``L = nk + nb - 1``."""
     na, nb, nk = est.output_lags_, est.input_lags_, est.input_delay
     p, m = est.n_outputs_, est.n_features_in_
@@ -111,13 +111,21 @@ def _tdl_matrices(est) -> tuple:
     Msu, Mso = np.zeros((n_s, m)), np.zeros((n_s, p))
     Msu[n_y : n_y + m] = np.eye(m)[: L * m]
     Mso[:p] = np.eye(p)
-    # The history simulate starts from, newest row first.
-    Yh, Uh = est._history(1, None)
-    start = np.r_[Yh[0][::-1][:na].ravel(), Uh[0][::-1][:L].ravel()]
+    # The history simulate's run-in starts from, newest row first.
+    Yh, Uh = _history_rows(est, origin)
+    start = np.r_[Yh[::-1][:na].ravel(), Uh[::-1][:L].ravel()]
     return est._S @ Ps, est._S @ Pu, Mss, Msu, Mso, np.eye(p), start
 
 
-def _issm_matrices(est) -> tuple:
+def _history_rows(est, origin) -> tuple[np.ndarray, np.ndarray]:
+    """Standardised history rows of a run from ``origin`` (``(initial,
+    initial_inputs)``, user units; None: zero)."""
+    initial, past = (None, None) if origin is None else ([origin[0]], [origin[1]])
+    data = est._stack([np.zeros((0, est.n_features_in_))], None, initial, past)
+    return data.Y[: data.h], data.U[: data.h]
+
+
+def _issm_matrices(est, origin) -> tuple:
     """ISSM: ``s = [x(t-1), u(t-1) .. u(t-nk)]``; ``z = [x, u(t-nk), e = 0]``."""
     n, p, m, nk = est.n_states_, est.n_outputs_, est.n_features_in_, est.input_delay
     n_s, n_z = n + nk * m, n + m + p
@@ -133,8 +141,9 @@ def _issm_matrices(est) -> tuple:
     Msu[n : n + m] = np.eye(m)[: nk * m]
     Mso[:n] = np.eye(n)
     Co = np.eye(p, n)
-    Yh, Uh = est._history(1, None)
-    start = np.r_[Yh[0][-1], np.zeros(n - p), Uh[0][::-1][:nk].ravel()]
+    Yh, Uh = _history_rows(est, origin)
+    unmeasured = np.zeros(n - p) if origin is None else origin[0][p:]
+    start = np.r_[Yh[-1], unmeasured, Uh[::-1][:nk].ravel()]
     return Mzs, Mzu, Mss, Msu, Mso, Co, start
 
 
@@ -147,7 +156,8 @@ def _step_map(est) -> _StepMap:
 
     check_network(est)
     build = _tdl_matrices if isinstance(est, TDLRegressor) else _issm_matrices
-    Mzs, Mzu, Mss, Msu, Mso, Co, start = build(est)
+    kind, origin = est._run_in()
+    Mzs, Mzu, Mss, Msu, Mso, Co, start = build(est, origin)
     layout = MLPLayout(est._sizes_, est._bypass())
     layers = [(W.copy(), b.copy()) for W, b in layout.matrices(est.coefs_)]
     bypass = layout.bypass_matrix(est.coefs_)
@@ -159,7 +169,6 @@ def _step_map(est) -> _StepMap:
     # simulate's run-in: zero excitation (in the user's units) brings the
     # model to rest (or onto its cycle) before the first sample; a model
     # without either has none.
-    kind = est._free_run_start()
     u0 = -est._x_mean / est._x_scale
     s = start
     for _ in range(_RUN_IN if kind != "zero" else 0):

@@ -26,6 +26,8 @@ from sysid_nn._analysis._uncertainty import (
 from sysid_nn._engine import _selection, _training
 from sysid_nn._engine._selection import burn_in, choose, validation_loss
 from sysid_nn._engine._solvers import _EarlyStop
+from sysid_nn._engine._state_estimation import estimator_rest_check, training_end
+from sysid_nn._export import _step_map
 from sysid_nn._records._data import _FREE_RUN
 
 
@@ -326,6 +328,84 @@ def test_noise_variance_carries_its_degrees_of_freedom_correction():
 
 
 # ------------------------------------------------------------ free runs
+def test_a_model_with_two_rests_starts_at_the_one_its_training_record_leads_to():
+    rng = np.random.default_rng(0)
+    X, y = rng.standard_normal((400, 1)), rng.standard_normal(400)
+    X[-20:] = -3.0  # the record ends pushed low
+    model = TDLRegressor(
+        hidden_layer_sizes=(1,), output_lags=1, input_lags=1,
+        lag_representation="delays", n_init=1, max_iter=1, random_state=0,
+    )  # fmt: skip
+    model = _fit(model, X, y)
+    mean, scale = model._y_mean[0], model._y_scale[0]
+    # Standardised, y(t) = 1.5 tanh(2 (y(t-1) - c) + u(t-1) - d) + c + 0.2
+    # with c and d the zero output and input: under zero excitation two
+    # rests, and the zero state runs to the upper one.
+    c, d = -mean / scale, -model._x_mean[0] / model._x_scale[0]
+    model.coefs_ = np.array([2.0, 1.0, -2.0 * c - d, 1.5, c + 0.2, 0.0, 0.0])
+    rests = []
+    for ys in (c, c - 2.0):
+        for _ in range(200):
+            ys = 1.5 * np.tanh(2.0 * (ys - c)) + c + 0.2
+        rests.append(ys * scale + mean)
+    upper, lower = rests
+    assert upper - lower > 2.5 * scale
+    model._find_rest(model._stack([X], [y[:, None]]))
+    check = model.rest_check_
+    assert (check.start, check.run_in_from, check.training_start) == (
+        "rest", "training", "rest",
+    )  # fmt: skip
+    np.testing.assert_allclose(model.rest_output_, [lower], rtol=1e-9)
+    np.testing.assert_allclose(model.simulate(np.zeros((5, 1))), lower, rtol=1e-9)
+    # The step map (the ONNX graph, to_dlti) starts there too.
+    step = _step_map(model)
+    np.testing.assert_allclose(step.rest[0] * scale + mean, lower, rtol=1e-9)
+    # From the zero state, as before the run-in started at the training
+    # record's end, the model rests at the other one.
+    model._run_in_from = None
+    check = estimator_rest_check(model)
+    assert (check.start, check.run_in_from, check.training_start) == (
+        "rest", "zero", None,
+    )  # fmt: skip
+    np.testing.assert_allclose(check.output, [upper], rtol=1e-9)
+    # The longest training record leads: one before it that ends high does
+    # not move the rest.
+    high = X[:60].copy()
+    high[-20:] = 3.0
+    records = model._stack([high, X], [y[:60, None], y[:, None]])
+    model._find_rest(records)
+    np.testing.assert_allclose(model.rest_output_, [lower], rtol=1e-9)
+    # Where the rest it leads to lies below the training outputs, the run-in
+    # starts from the zero state.
+    model._y_range = ((lower - mean) / scale + np.array([0.5]), model._y_range[1])
+    model._find_rest(records)
+    check = model.rest_check_
+    assert (check.start, check.run_in_from, check.training_start) == (
+        "rest", "zero", "zero",
+    )  # fmt: skip
+    np.testing.assert_allclose(model.rest_output_, [upper], rtol=1e-9)
+
+
+@pytest.mark.parametrize("cls", [TDLRegressor, ISSMRegressor])
+def test_the_run_in_starts_where_the_training_records_free_run_ends(cls):
+    X, y = _records(2)
+    model = _fit(cls(hidden_layer_sizes=(3,), n_init=1, max_iter=3), X, y)
+    outputs = [np.reshape(y[1][:200], (-1, 1)), np.reshape(y[0], (-1, 1))]
+    records = model._stack([X[1][:200], X[0]], outputs)
+    initial, past = training_end(model, records)
+    # The fit's free run over the record starts from the zero state.
+    if cls is TDLRegressor:
+        zero = np.zeros((model.output_lags_, 1))
+        run = model.simulate(X[0], initial_outputs=zero)
+        np.testing.assert_allclose(initial[:, 0], run[len(run) - len(initial) :])
+    else:
+        zero = np.zeros(model.n_states_)
+        states = model.predict_states(X[0], initial_state=zero).states
+        np.testing.assert_allclose(initial, states[-1])
+    assert model.rest_check_.run_in_from == "training"
+    np.testing.assert_array_equal(past, X[0][len(X[0]) - len(past) :])
+
+
 def test_a_model_without_rest_starts_from_zero_without_run_in():
     # Records with an offset: the zero state is far from the model's rest,
     # so a run-in would change the start of every free run.

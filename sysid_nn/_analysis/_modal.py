@@ -411,8 +411,8 @@ def _local_state_matrices(est, lin: _Linearisation, X: np.ndarray):
     matrix at every sample; the ISSM's kernels return ``d x(t) / d z`` of
     the run (``D``). Rows after a divergence are NaN.
     """
-    Xs, leads = est._from_rest([X], True)
-    data = est._stack(Xs, None)
+    Xs, leads, initial, past = est._from_rest([X], True)
+    data = est._stack(Xs, None, initial, past)
     w = est.coefs_
     rows = data.modelled[int(leads[0]) :]
     out = np.full((len(rows), lin.n, lin.n), np.nan)
@@ -424,7 +424,7 @@ def _local_state_matrices(est, lin: _Linearisation, X: np.ndarray):
             A[: lin.p] = (jz @ lin.S)[:, : lin.n]
             out[i] = A
     else:
-        X0 = est._initial_states(data)
+        X0 = est._initial_states(data, initial)
         _, _, diverged, (_, _, _, D) = est._run_from(
             w, data, _FREE_RUN, False, X0, want_lin=True, keep_state=True
         )

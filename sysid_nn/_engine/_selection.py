@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sysid_nn._engine._state_estimation import _segments, rest_check, zero_start_run
+from sysid_nn._engine._state_estimation import _segments, free_run_from, rest_check
 from sysid_nn._exceptions import user_stacklevel
 from sysid_nn._records._data import _FREE_RUN, _Data
 from sysid_nn._statistics import loss_differential_statistic
@@ -703,7 +703,7 @@ def self_oscillating(est, runs: list, train) -> list[bool]:
     return [
         bool(np.isfinite(r.criterion))
         and rest_check(
-            zero_start_run(est, r.w, level), est.n_features_in_, y_range
+            free_run_from(est, r.w, level=level), est.n_features_in_, y_range
         ).cycling
         for r in runs
     ]

@@ -22,7 +22,7 @@ from sklearn.utils import Bunch
 
 from sysid_nn._engine import _least_squares as least_squares
 from sysid_nn._engine._least_squares import with_intercept
-from sysid_nn._records._data import _FREE_RUN
+from sysid_nn._records._data import _FREE_RUN, _Data
 
 #: Output and input lags of the linear one-step model whose residuals give
 #: the noise level.
@@ -317,15 +317,17 @@ def rest_check(free_run, n_inputs: int, y_range) -> Bunch:
     )
 
 
-def zero_start_run(est, w: np.ndarray, level=0.0):
+def free_run_from(est, w: np.ndarray, origin=None, level=0.0):
     """``free_run(X)`` of :func:`rest_check` for ``est`` with the weights
     ``w``: the standardised free run of one sequence ``X`` (user units),
-    shifted by the excitation ``level``, from zero initial conditions, and
-    whether it diverged."""
+    shifted by the excitation ``level``, from the initial conditions
+    ``origin`` (``(initial, initial_inputs)`` in the user's units, as
+    :meth:`simulate` takes them; None: zero), and whether it diverged."""
+    initial, past = (None, None) if origin is None else ([origin[0]], [origin[1]])
 
     def free_run(X):
-        data = est._stack([X + level], None)
-        Yhat, _, diverged, _ = est._run(w, data, _FREE_RUN, False, keep_state=False)
+        data = est._stack([X + level], None, initial, past)
+        Yhat, _, diverged = est._free_run(data, initial, w=w)
         return Yhat[data.h :], bool(diverged[0] >= 0)
 
     return free_run
@@ -344,3 +346,55 @@ def _on_cycle(before: np.ndarray, last: np.ndarray) -> bool:
         np.abs(last.max(axis=0) - hi) <= _CYCLE_TOL * width
     )
     return bool(np.all(same))
+
+
+def training_end(est, data: _Data) -> tuple | None:
+    """The initial conditions ``(initial, initial_inputs)`` (user units)
+    where the fitted ``est``'s free run over the longest record of ``data``,
+    from the record's own start, ends; None where it diverged."""
+    s = int(np.argmax(np.diff(data.starts)))
+    Yhat, _, diverged, state = est._run(
+        est.coefs_, data, _FREE_RUN, False, keep_state=False
+    )
+    if diverged[s] >= 0:
+        return None
+    end = int(data.starts[s + 1])
+    past = data.U[end - data.h : end] * est._x_scale + est._x_mean
+    return est._conditions_at(Yhat, state, data, s), past
+
+
+def estimator_rest_check(est) -> Bunch:
+    """:func:`rest_check` of ``est``'s current weights, in the user's units
+    (``rest_check_``), with where its run-in starts.
+
+    The run-in starts where the free run over the longest training record
+    ends (:func:`training_end`), so that a model with more than one rest
+    settles at the one its training records lead to (a Silverbox ISSM
+    rests at +5.4 mV from zero, and at -5.4 mV, as the system does, from
+    there); from zero where that finds neither a rest nor a cycle, or the
+    run diverged.
+    """
+    origin = getattr(est, "_run_in_from", None)
+
+    def check_from(start):
+        run = free_run_from(est, est.coefs_, start)
+        return rest_check(run, est.n_features_in_, est._y_range)
+
+    led = None if origin is None else check_from(origin)
+    from_training = led is not None and led.start != "zero"
+    check = led if from_training else check_from(None)
+    mean, scale = est._y_mean, est._y_scale
+    low, high = est._y_range
+    return Bunch(
+        start=check.start,
+        reason=check.reason,
+        cycling=check.cycling,
+        output=None if check.output is None else check.output * scale + mean,
+        end=check.end * scale + mean,
+        change=check.change * scale,
+        tolerance=_SETTLED_TOL * scale,
+        training_range=(low * scale + mean, high * scale + mean),
+        run_in=_RUN_IN,
+        run_in_from="training" if from_training else "zero",
+        training_start=None if led is None else led.start,
+    )

@@ -34,7 +34,6 @@ from itertools import pairwise
 import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.exceptions import ConvergenceWarning
-from sklearn.utils import Bunch
 from sklearn.utils._param_validation import Interval, StrOptions
 from sklearn.utils.validation import check_is_fitted
 
@@ -51,10 +50,9 @@ from sysid_nn._engine._schedule import training_stages
 from sysid_nn._engine._solvers import _Objective
 from sysid_nn._engine._state_estimation import (
     _RUN_IN,
-    _SETTLED_TOL,
+    estimator_rest_check,
     fit_initial_condition,
-    rest_check,
-    zero_start_run,
+    training_end,
 )
 from sysid_nn._engine._training import (
     _REFINE_BUDGET,
@@ -323,9 +321,7 @@ class _RecurrentRegressorBase(
             _uncertainty.fit_covariance(self, fitted)
             modelled = fitted.Y[fitted.modelled]
             self._y_range = (modelled.min(axis=0), modelled.max(axis=0))
-            self.rest_check_ = self._rest_check()
-            self.rest_output_ = self.rest_check_.output
-            self._rest_weights = self.coefs_.copy()  # whose rest that is
+            self._find_rest(fitted)
         self._sysid_nn_version = version_stamp()
         chosen = result.run
         skipped = [i for i, stage in enumerate(chosen.history) if stage.skipped]
@@ -722,7 +718,8 @@ class _RecurrentRegressorBase(
                     f"estimates the {initial_name} from measured outputs."
                 )
             initial = self._estimate_initial(Xs, y_init, as_list, past)
-        Xs, leads = self._from_rest(Xs, initial is None and past is None)
+        at_rest = initial is None and past is None
+        Xs, leads, initial, past = self._from_rest(Xs, at_rest, initial, past)
         data = self._stack(Xs, None, initial, past)
         Yhat, J, diverged = self._free_run(data, initial, return_std)
         self._warn_divergence(after_run_in(diverged, leads), as_list)
@@ -734,58 +731,59 @@ class _RecurrentRegressorBase(
         std = [s[k:] for s, k in zip(std, leads, strict=True)]
         return (y_sim, std) if as_list else (y_sim[0], std[0])
 
-    def _from_rest(self, Xs: list, at_rest: bool) -> tuple[list, np.ndarray]:
+    def _from_rest(self, Xs: list, at_rest: bool, initial=None, past=None) -> tuple:
         """The sequences preceded by the run-in that brings the model to rest.
 
         Only when ``at_rest`` (no initial conditions given) and the model
-        starts at its rest or on its cycle (see
-        :func:`~sysid_nn._engine._state_estimation.rest_check`:
-        ``rest_check_`` for the fitted weights, found again for weights
-        changed since). The run-in is run with each sequence, not replaced
-        by its end state, so that the weights' uncertainty reaches the rest
-        too. Returns the sequences and the run-in length of each.
+        starts at its rest or on its cycle (see :meth:`_run_in`). The run-in
+        is run with each sequence, not replaced by its end state, so that
+        the weights' uncertainty reaches the rest too. Returns the
+        sequences, the run-in length of each and the initial conditions and
+        excitation before the first sample (``initial``, ``past``): those
+        given, or where the run-in starts.
         """
-        start = self._free_run_start() if at_rest else "zero"
+        start, origin = self._run_in() if at_rest else ("zero", None)
         lead = _RUN_IN if start != "zero" else 0
         Xs = [np.concatenate([np.zeros((lead, Xi.shape[1])), Xi]) for Xi in Xs]
-        return Xs, np.full(len(Xs), lead, dtype=np.int64)
+        if lead and origin is not None:
+            initial, past = [origin[0]] * len(Xs), [origin[1]] * len(Xs)
+        return Xs, np.full(len(Xs), lead, dtype=np.int64), initial, past
 
-    def _free_run_start(self) -> str:
-        """Where a free run without initial conditions starts: ``"rest"``,
-        ``"cycle"`` or ``"zero"`` (``rest_check_.start`` for the fitted
-        weights, found again for weights changed since)."""
+    def _find_rest(self, fitted: _Data) -> None:
+        """``rest_check_`` and ``rest_output_`` of the weights: their run-in
+        starts where their free run over the longest record of ``fitted``
+        ends (see :func:`~sysid_nn._engine._state_estimation.training_end`)."""
+        self._run_in_from = training_end(self, fitted)
+        self.rest_check_ = estimator_rest_check(self)
+        self.rest_output_ = self.rest_check_.output
+        self._rest_weights = self.coefs_.copy()  # whose rest that is
+
+    def _run_in(self) -> tuple[str, tuple | None]:
+        """Where a free run without initial conditions starts (``"rest"``,
+        ``"cycle"`` or ``"zero"``) and the initial conditions ``(initial,
+        initial_inputs)`` (user units) its run-in starts from, None for zero:
+        ``rest_check_`` for the fitted weights, found again for weights
+        changed since."""
         if not hasattr(self, "_y_range"):
-            return "zero"  # fitted before the range was kept: no rest
+            return "zero", None  # fitted before the range was kept: no rest
         fitted = np.array_equal(self.coefs_, self._rest_weights)
-        return (self.rest_check_ if fitted else self._rest_check()).start
+        check = self.rest_check_ if fitted else estimator_rest_check(self)
+        led = check.get("run_in_from") == "training" and check.start != "zero"
+        return check.start, (self._run_in_from if led else None)
 
-    def _rest_check(self) -> Bunch:
-        """:func:`~sysid_nn._engine._state_estimation.rest_check` of the current
-        weights, in the user's units (``rest_check_``)."""
-        run = zero_start_run(self, self.coefs_)
-        check = rest_check(run, self.n_features_in_, self._y_range)
-        mean, scale = self._y_mean, self._y_scale
-        return Bunch(
-            start=check.start,
-            reason=check.reason,
-            cycling=check.cycling,
-            output=None if check.output is None else check.output * scale + mean,
-            end=check.end * scale + mean,
-            change=check.change * scale,
-            tolerance=_SETTLED_TOL * scale,
-            training_range=(self._y_range[0] * scale + mean,
-                            self._y_range[1] * scale + mean),
-            run_in=_RUN_IN,
-        )  # fmt: skip
+    @abstractmethod
+    def _conditions_at(self, Yhat, state, data: _Data, s: int) -> np.ndarray:
+        """The initial condition (``initial``, user units) that continues the
+        run ``(Yhat, state)`` of :meth:`_run` after the end of sequence ``s``."""
 
-    def _free_run(self, data: _Data, initial, want_jac: bool = False):
-        """Free run of the fitted model from the initial conditions in ``data``.
+    def _free_run(self, data: _Data, initial, want_jac: bool = False, w=None):
+        """Free run of the fitted model (or of the weights ``w``) from the
+        initial conditions in ``data``.
 
         Returns ``(Yhat, J or None, diverged)``.
         """
-        Yhat, J, diverged, _ = self._run(
-            self.coefs_, data, _FREE_RUN, want_jac, keep_state=False
-        )
+        w = self.coefs_ if w is None else w
+        Yhat, J, diverged, _ = self._run(w, data, _FREE_RUN, want_jac, keep_state=False)
         return Yhat, J, diverged
 
     @abstractmethod

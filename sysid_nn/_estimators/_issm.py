@@ -578,12 +578,18 @@ default=None
     def _initial_guess(self, y0):
         return np.r_[y0, np.zeros(self.n_states_ - self.n_outputs_)]
 
-    def _free_run(self, data, initial, want_jac=False):
+    def _free_run(self, data, initial, want_jac=False, w=None):
         X0 = self._initial_states(data, initial)
+        w = self.coefs_ if w is None else w
         Yhat, J, diverged, _ = self._run_from(
-            self.coefs_, data, _FREE_RUN, want_jac, X0, keep_state=False
+            w, data, _FREE_RUN, want_jac, X0, keep_state=False
         )
         return Yhat, J, diverged
+
+    def _conditions_at(self, Yhat, state, data, s):
+        x = state[0][data.starts[s + 1] - 1]
+        return np.r_[x[: self.n_outputs_] * self._y_scale + self._y_mean,
+                     x[self.n_outputs_ :]]  # fmt: skip
 
     def _initial_states(self, data: _Data, initial=None) -> np.ndarray:
         """``X0`` of every sequence: ``data.X0`` where set, else the measured
@@ -606,8 +612,9 @@ default=None
         Xs, ys, as_list, _ = self._validate_Xy(X, y, reset=False, y_required=False)
         self._check_lengths(Xs, 1)
         initial = self._check_initial(initial, len(Xs), as_list, "initial_state")
-        Xs, leads = self._from_rest(Xs, ys is None and initial is None)
-        data = self._stack(Xs, ys, initial)
+        at_rest = ys is None and initial is None
+        Xs, leads, initial, past = self._from_rest(Xs, at_rest, initial)
+        data = self._stack(Xs, ys, initial, past)
         return data, self._initial_states(data, initial), as_list, leads
 
     # ------------------------------------------------------ starting point

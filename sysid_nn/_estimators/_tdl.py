@@ -370,6 +370,11 @@ such, default=None
                 Yh[s][h - self.output_lags_ :] = (init - self._y_mean) / self._y_scale
         return Yh, [u0] * n_seq
 
+    def _conditions_at(self, Yhat, state, data, s):
+        a, b = data.starts[s], data.starts[s + 1]
+        Y = np.r_[data.Y[a : a + data.h], Yhat[a + data.h : b]]
+        return Y[len(Y) - self.output_lags_ :] * self._y_scale + self._y_mean
+
     def _initial_layout(self):
         shape = (self.output_lags_, self.n_outputs_)
         count = f"output_lags_ x n_outputs = {shape}"
