@@ -247,8 +247,9 @@ validation_continues_record_ : bool or None
     state); None without validation records.
 rest_output_ : ndarray of shape (n_outputs,) or None
     The output at the model's rest, where its free run settles under zero
-    excitation (after 8192 samples of it; user units): free runs without
-    initial conditions start there. None where the model does not settle
+    excitation (after 8192 samples of it, from where its free run over the
+    longest training record ends; user units): free runs without initial
+    conditions start there. None where the model does not settle
     (an integrating or self-oscillating one) or settles outside the range
     of the training outputs; free runs then start from zero, or, for a
     model on a sustained cycle within that range, after the run-in, on its
@@ -261,7 +262,14 @@ rest_check_ : Bunch
     that range or beyond it: the model self-oscillates), ``end`` (the output
     after the run-in), ``change`` (its largest change over the run-in's last
     2048 samples) against ``tolerance``, ``training_range`` (lowest and
-    highest training output) and ``run_in`` (the run-in's length).
+    highest training output), ``run_in`` (the run-in's length),
+    ``run_in_from`` (``"training"``: the run-in starts where the free run
+    over the longest training record ends, so that a model with two rests
+    settles at the one its training records lead to; ``"zero"``: from the
+    zero state, where that finds neither a rest nor a cycle) and
+    ``training_start`` (what the run-in from the training record's end
+    found: ``"rest"``, ``"cycle"``, ``"zero"``, or None where that free run
+    diverged).
 linear_score_ : float or None
     Negative selection loss of that linear model; None where it is not a
     candidate (no hidden layer, no linear part, or the ISSM's TDL start).
