@@ -26,7 +26,7 @@ from sysid_nn._analysis._uncertainty import (
 from sysid_nn._engine import _selection, _training
 from sysid_nn._engine._selection import burn_in, choose, validation_loss
 from sysid_nn._engine._solvers import _EarlyStop
-from sysid_nn._engine._state_estimation import estimator_rest_check, training_end
+from sysid_nn._engine._state_estimation import training_end
 from sysid_nn._export import _step_map
 from sysid_nn._records._data import _FREE_RUN
 
@@ -350,31 +350,41 @@ def test_a_model_with_two_rests_starts_at_the_one_its_training_record_leads_to()
         rests.append(ys * scale + mean)
     upper, lower = rests
     assert upper - lower > 2.5 * scale
-    model._find_rest(model._stack([X], [y[:, None]]))
+    # The record as the system gives it from its lower rest: the model's
+    # free run over it ends there too, and from there fits it exactly.
+    y = model.simulate(X, initial_outputs=[[lower]])
+    records = model._stack([X], [y[:, None]])
+    model._find_rest(records)
     check = model.rest_check_
     assert (check.start, check.run_in_from, check.training_start) == (
         "rest", "training", "rest",
     )  # fmt: skip
+    from_zero, from_end = check.record_losses
+    assert from_end < 1e-20 and from_zero > 0.1
     np.testing.assert_allclose(model.rest_output_, [lower], rtol=1e-9)
+    np.testing.assert_allclose(check.training_end_output, [lower], rtol=1e-9)
     np.testing.assert_allclose(model.simulate(np.zeros((5, 1))), lower, rtol=1e-9)
     # The step map (the ONNX graph, to_dlti) starts there too.
     step = _step_map(model)
     np.testing.assert_allclose(step.rest[0] * scale + mean, lower, rtol=1e-9)
-    # From the zero state, as before the run-in started at the training
-    # record's end, the model rests at the other one.
-    model._run_in_from = None
-    check = estimator_rest_check(model)
-    assert (check.start, check.run_in_from, check.training_start) == (
-        "rest", "zero", None,
-    )  # fmt: skip
-    np.testing.assert_allclose(check.output, [upper], rtol=1e-9)
     # The longest training record leads: one before it that ends high does
     # not move the rest.
     high = X[:60].copy()
     high[-20:] = 3.0
-    records = model._stack([high, X], [y[:60, None], y[:, None]])
-    model._find_rest(records)
+    model._find_rest(model._stack([high, X], [y[:60, None], y[:, None]]))
     np.testing.assert_allclose(model.rest_output_, [lower], rtol=1e-9)
+    # A record from the upper rest: its free run still ends at the lower
+    # one, but from the upper one the model fits it, and that is kept (as
+    # for an integrator, whose record ends at one of its rests but starts
+    # at another).
+    y_up = model.simulate(X, initial_outputs=[[upper]])
+    model._find_rest(model._stack([X], [y_up[:, None]]))
+    check = model.rest_check_
+    assert (check.start, check.run_in_from, check.training_start) == (
+        "rest", "zero", "rest",
+    )  # fmt: skip
+    assert check.record_losses[0] < check.record_losses[1]
+    np.testing.assert_allclose(model.rest_output_, [upper], rtol=1e-9)
     # Where the rest it leads to lies below the training outputs, the run-in
     # starts from the zero state.
     model._y_range = ((lower - mean) / scale + np.array([0.5]), model._y_range[1])
@@ -389,7 +399,9 @@ def test_a_model_with_two_rests_starts_at_the_one_its_training_record_leads_to()
 @pytest.mark.parametrize("cls", [TDLRegressor, ISSMRegressor])
 def test_the_run_in_starts_where_the_training_records_free_run_ends(cls):
     X, y = _records(2)
-    model = _fit(cls(hidden_layer_sizes=(3,), n_init=1, max_iter=3), X, y)
+    model = _fit(
+        cls(hidden_layer_sizes=(3,), n_init=1, max_iter=3, random_state=0), X, y
+    )
     outputs = [np.reshape(y[1][:200], (-1, 1)), np.reshape(y[0], (-1, 1))]
     records = model._stack([X[1][:200], X[0]], outputs)
     initial, past = training_end(model, records)
@@ -402,8 +414,12 @@ def test_the_run_in_starts_where_the_training_records_free_run_ends(cls):
         zero = np.zeros(model.n_states_)
         states = model.predict_states(X[0], initial_state=zero).states
         np.testing.assert_allclose(initial, states[-1])
-    assert model.rest_check_.run_in_from == "training"
     np.testing.assert_array_equal(past, X[0][len(X[0]) - len(past) :])
+    # One rest (or one cycle), reached from either start: the zero state's
+    # run-in, as before.
+    check = model.rest_check_
+    assert check.start != "zero" and check.training_start == check.start
+    assert check.run_in_from == "zero" and check.record_losses is None
 
 
 def test_a_model_without_rest_starts_from_zero_without_run_in():

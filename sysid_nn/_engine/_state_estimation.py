@@ -352,7 +352,7 @@ def training_end(est, data: _Data) -> tuple | None:
     """The initial conditions ``(initial, initial_inputs)`` (user units)
     where the fitted ``est``'s free run over the longest record of ``data``,
     from the record's own start, ends; None where it diverged."""
-    s = int(np.argmax(np.diff(data.starts)))
+    s = _longest(data)
     Yhat, _, diverged, state = est._run(
         est.coefs_, data, _FREE_RUN, False, keep_state=False
     )
@@ -363,28 +363,86 @@ def training_end(est, data: _Data) -> tuple | None:
     return est._conditions_at(Yhat, state, data, s), past
 
 
-def estimator_rest_check(est) -> Bunch:
+def _longest(data: _Data) -> int:
+    return int(np.argmax(np.diff(data.starts)))
+
+
+def _check_from(est, origin) -> Bunch:
+    """:func:`rest_check` of ``est``'s weights with the run-in from ``origin``
+    (see :func:`free_run_from`)."""
+    run = free_run_from(est, est.coefs_, origin)
+    return rest_check(run, est.n_features_in_, est._y_range)
+
+
+def run_in_origin(est, data: _Data) -> tuple:
+    """Where the fitted ``est``'s run-in starts, and the evidence.
+
+    From where its free run over the longest record of ``data`` ends
+    (:func:`training_end`) where the run-in from there finds a rest or a
+    cycle and the run-in from the zero state does not, or finds another
+    rest (a network can have two, and the zero state need not lie in the
+    basin of the system's) and the free run over that record started there
+    fits it better (an integrator's rests are a continuum: the training
+    record's end is one of them but not where its records start). From
+    the zero state otherwise: a model with one rest, or one cycle, reaches
+    it from there, as before. Returns the origin (None: the zero state) and
+    a Bunch: ``training_start`` (the start the run-in from the training
+    record's end found, None where that free run diverged),
+    ``training_end_output`` (its output at the end of that run-in,
+    standardised) and ``record_losses`` (the mean squared standardised
+    misfit of the record's free run from the zero state's run-in and from
+    the training end's, or None where they were not compared).
+    """
+    origin = training_end(est, data)
+    led = None if origin is None else _check_from(est, origin)
+    evidence = Bunch(
+        training_start=None if led is None else led.start,
+        training_end_output=None if led is None else led.end,
+        record_losses=None,
+    )
+    if led is None or led.start == "zero":
+        return None, evidence
+    zero = _check_from(est, None)
+    if zero.start == "zero":
+        return origin, evidence
+    same = zero.start == led.start and (
+        zero.start == "cycle" or np.all(np.abs(zero.end - led.end) <= _SETTLED_TOL)
+    )
+    if same:
+        return None, evidence
+    s = _longest(data)
+    a, b = data.starts[s] + data.h, data.starts[s + 1]
+    X = data.U[a:b] * est._x_scale + est._x_mean
+    losses = []
+    for start in (None, origin):
+        Y, diverged = free_run_from(est, est.coefs_, start)(
+            np.concatenate([np.zeros((_RUN_IN, X.shape[1])), X])
+        )
+        misfit = np.mean((Y[_RUN_IN:] - data.Y[a:b]) ** 2)
+        losses.append(np.inf if diverged else float(misfit))
+    evidence.record_losses = tuple(losses)
+    return (origin if losses[1] < losses[0] else None), evidence
+
+
+def estimator_rest_check(est, evidence: Bunch | None = None) -> Bunch:
     """:func:`rest_check` of ``est``'s current weights, in the user's units
     (``rest_check_``), with where its run-in starts.
 
-    The run-in starts where the free run over the longest training record
-    ends (:func:`training_end`), so that a model with more than one rest
-    settles at the one its training records lead to (a Silverbox ISSM
-    rests at +5.4 mV from zero, and at -5.4 mV, as the system does, from
-    there); from zero where that finds neither a rest nor a cycle, or the
-    run diverged.
+    The run-in starts from ``est._run_in_from`` (see :func:`run_in_origin`)
+    where that finds a rest or a cycle, else from the zero state.
+    ``evidence``: the Bunch of :func:`run_in_origin`, reported in the
+    user's units.
     """
     origin = getattr(est, "_run_in_from", None)
-
-    def check_from(start):
-        run = free_run_from(est, est.coefs_, start)
-        return rest_check(run, est.n_features_in_, est._y_range)
-
-    led = None if origin is None else check_from(origin)
+    led = None if origin is None else _check_from(est, origin)
     from_training = led is not None and led.start != "zero"
-    check = led if from_training else check_from(None)
+    check = led if from_training else _check_from(est, None)
     mean, scale = est._y_mean, est._y_scale
     low, high = est._y_range
+    evidence = evidence or Bunch(
+        training_start=None, training_end_output=None, record_losses=None
+    )
+    end = evidence.training_end_output
     return Bunch(
         start=check.start,
         reason=check.reason,
@@ -396,5 +454,7 @@ def estimator_rest_check(est) -> Bunch:
         training_range=(low * scale + mean, high * scale + mean),
         run_in=_RUN_IN,
         run_in_from="training" if from_training else "zero",
-        training_start=None if led is None else led.start,
+        training_start=evidence.training_start,
+        training_end_output=None if end is None else end * scale + mean,
+        record_losses=evidence.record_losses,
     )

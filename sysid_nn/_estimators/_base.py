@@ -52,7 +52,7 @@ from sysid_nn._engine._state_estimation import (
     _RUN_IN,
     estimator_rest_check,
     fit_initial_condition,
-    training_end,
+    run_in_origin,
 )
 from sysid_nn._engine._training import (
     _REFINE_BUDGET,
@@ -750,11 +750,11 @@ class _RecurrentRegressorBase(
         return Xs, np.full(len(Xs), lead, dtype=np.int64), initial, past
 
     def _find_rest(self, fitted: _Data) -> None:
-        """``rest_check_`` and ``rest_output_`` of the weights: their run-in
-        starts where their free run over the longest record of ``fitted``
-        ends (see :func:`~sysid_nn._engine._state_estimation.training_end`)."""
-        self._run_in_from = training_end(self, fitted)
-        self.rest_check_ = estimator_rest_check(self)
+        """``rest_check_`` and ``rest_output_`` of the weights, and where
+        their run-in starts: see
+        :func:`~sysid_nn._engine._state_estimation.run_in_origin`."""
+        self._run_in_from, evidence = run_in_origin(self, fitted)
+        self.rest_check_ = estimator_rest_check(self, evidence)
         self.rest_output_ = self.rest_check_.output
         self._rest_weights = self.coefs_.copy()  # whose rest that is
 
