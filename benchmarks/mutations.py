@@ -134,8 +134,8 @@ MUTATIONS = (
     Mutation(
         "run-in from the zero state",
         "sysid_nn/_estimators/_base.py",
-        "self._run_in_from = training_end(self, fitted)",
-        "self._run_in_from = None",
+        "self._run_in_from, evidence = run_in_origin(self, fitted)",
+        "self._run_in_from, evidence = None, run_in_origin(self, fitted)[1]",
         (
             f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
             "record_leads_to",
@@ -144,21 +144,48 @@ MUTATIONS = (
     Mutation(
         "run-in from the first record",
         "sysid_nn/_engine/_state_estimation.py",
-        "s = int(np.argmax(np.diff(data.starts)))",
-        "s = 0",
+        "return int(np.argmax(np.diff(data.starts)))",
+        "return 0",
         (
             f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
             "record_leads_to",
         ),
     ),
     Mutation(
-        "run-in from the training end without rest",
+        "run-in: the training end by default",
         "sysid_nn/_engine/_state_estimation.py",
-        'from_training = led is not None and led.start != "zero"',
-        "from_training = led is not None",
+        "return (origin if losses[1] < losses[0] else None), evidence",
+        "return origin, evidence",
         (
             f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
             "record_leads_to",
+        ),
+    ),
+    Mutation(
+        "run-in: two rests by their record alike",
+        "sysid_nn/_engine/_state_estimation.py",
+        "    if same:\n",
+        "    if False:\n",
+        (f"{POLICY}::test_the_run_in_starts_where_the_training_records_free_run_ends",),
+    ),
+    Mutation(
+        "run-in: only a rest of the zero state's",
+        "sysid_nn/_engine/_state_estimation.py",
+        '    if zero.start == "zero":\n        return origin, evidence\n',
+        '    if zero.start == "zero":\n        return None, evidence\n',
+        (
+            f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
+            "record_leads_to",
+        ),
+    ),
+    Mutation(
+        "a check every restart fails counts",
+        "sysid_nn/_engine/_selection.py",
+        "telling = checks[finite].any(axis=0)",
+        "telling = np.ones(checks.shape[1], dtype=bool)",
+        (
+            "tests/test_selection.py"
+            "::test_a_check_every_restart_fails_leaves_the_others_to_decide",
         ),
     ),
     Mutation(
@@ -308,8 +335,8 @@ MUTATIONS = (
     Mutation(
         "constant-input excursion not disqualifying",
         "sysid_nn/_engine/_selection.py",
-        "and bool(x <= 1.0)",
-        "and bool(x <= np.inf)",
+        "                x <= 1.0,\n",
+        "                x <= np.inf,\n",
         (
             "tests/test_selection.py::"
             "test_restart_that_settles_on_the_wrong_side_or_swings_is_not_chosen",

@@ -385,8 +385,19 @@ def test_a_model_with_two_rests_starts_at_the_one_its_training_record_leads_to()
     )  # fmt: skip
     assert check.record_losses[0] < check.record_losses[1]
     np.testing.assert_allclose(model.rest_output_, [upper], rtol=1e-9)
+    # Where the zero state's rest lies above the training outputs and the
+    # training record's end finds one within them, the run-in starts there.
+    full = model._y_range
+    model._y_range = (full[0], (upper - mean) / scale - np.array([0.5]))
+    model._find_rest(records)
+    check = model.rest_check_
+    assert (check.start, check.run_in_from, check.record_losses) == (
+        "rest", "training", None,
+    )  # fmt: skip
+    np.testing.assert_allclose(model.rest_output_, [lower], rtol=1e-9)
     # Where the rest it leads to lies below the training outputs, the run-in
     # starts from the zero state.
+    model._y_range = full
     model._y_range = ((lower - mean) / scale + np.array([0.5]), model._y_range[1])
     model._find_rest(records)
     check = model.rest_check_

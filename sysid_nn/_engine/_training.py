@@ -232,6 +232,10 @@ class Training:
     #: Per run, whether its free run stays bounded at twice the training
     #: amplitude (see :func:`sysid_nn._engine._selection.bounded_beyond_range`).
     bounded: list = field(default_factory=list)
+    #: Per run, which bound checks it passed: the constant-input check, twice
+    #: the amplitude, excitations like the training records' (see
+    #: :func:`sysid_nn._engine._selection.choose`).
+    checks: np.ndarray | None = None
     #: Per run, its constant-input excursion over its bound (see
     #: :func:`sysid_nn._engine._selection.excursion_ratios`).
     excursions: np.ndarray | None = None
@@ -307,7 +311,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
     batches = 1
     while True:
         retry = batches <= _EXTRA_BATCHES and linear is not None
-        best, chosen, selected, bounded, excursions, cycling, advantage = (
+        best, chosen, selected, bounded, excursions, cycling, checks, advantage = (
             choose_restart(
                 est, train_data, val, runs, linear, closed_form, retry, refined
             )
@@ -342,6 +346,7 @@ def train(est, train_data: _Data, val: _Data | None) -> Training:
         linear=linear,
         chosen_run=chosen,
         bounded=bounded,
+        checks=checks,
         excursions=excursions,
         self_oscillating=cycling,
         refined=refined,
@@ -413,11 +418,11 @@ def choose_restart(
     refined: int | None = None,
 ):
     """The run whose weights ``fit`` returns: ``(index, run, selected,
-    bounded, excursions, cycling, advantage)``, ``bounded`` whether each
+    bounded, excursions, cycling, checks, advantage)``, ``bounded`` whether each
     run's free run stays bounded, ``excursions`` its constant-input
     excursion over its bound, ``cycling`` whether it self-oscillates under
     the median excitation held, ``advantage`` the best restart's over the
-    refinement (or None).
+    refinement (or None), ``checks`` which bound checks each run passed.
 
     Among the restarts whose free run stays bounded beyond the training
     range, the one with the lowest criterion (the validation loss of its
@@ -426,11 +431,11 @@ def choose_restart(
     it beats the linear model; else the linear model (``index`` None,
     ``selected`` ``"linear"``). See :func:`sysid_nn._engine._selection.choose`.
     """
-    chosen, selected, bounded, excursions, cycling, advantage = _selection.choose(
+    chosen, selected, *evidence = _selection.choose(
         est, train_data, val, runs, linear, closed_form, retry, refined
     )
     index = next((k for k, r in enumerate(runs) if r is chosen), None)
-    return index, chosen, selected, bounded, excursions, cycling, advantage
+    return index, chosen, selected, *evidence
 
 
 def fallback(est, w: np.ndarray, train_data: _Data, val: _Data | None):

@@ -463,6 +463,7 @@ class _RecurrentRegressorBase(
         self.restart_scores_ = np.array([-r.criterion for r in result.runs])
         self.restart_losses_ = np.array([r.loss for r in result.runs])
         self.restart_bounded_ = np.array(result.bounded, dtype=bool)
+        self.restart_checks_ = np.asarray(result.checks, dtype=bool)
         self.restart_excursions_ = np.asarray(result.excursions, dtype=float)
         self.restart_self_oscillating_ = np.array(result.self_oscillating, dtype=bool)
         self.n_restarts_ = len(result.runs)

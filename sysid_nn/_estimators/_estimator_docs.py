@@ -116,9 +116,16 @@ restart_bounded_ : ndarray of bool
     twice the larger of that value and the linear model's reach under two
     excitations like the training records' (their Fourier phases drawn
     anew from a fixed seed, spectrum and range kept), and passes the
-    constant-input check (``restart_excursions_`` at most 1); the others
-    are candidates only where none passes, those that do not self-oscillate
-    (``restart_self_oscillating_``) first.
+    constant-input check (``restart_excursions_`` at most 1), with a
+    finite validation score; the others are candidates only where none
+    passes. Then those that pass every check some finite restart passes
+    (a check that all of them fail tells nothing) come first, and, among
+    those and the rest, those that do not self-oscillate
+    (``restart_self_oscillating_``).
+restart_checks_ : ndarray of bool, shape (n_restarts, 3)
+    Which bound checks each restart passed (``restart_bounded_`` is all
+    three and a finite validation score): the constant-input check, twice
+    the training amplitude, the excitations like the training records'.
 restart_excursions_ : ndarray
     Each restart's constant-input check: its free runs from rest under
     constant inputs at the minimum, quartiles and maximum of the training

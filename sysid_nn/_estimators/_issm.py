@@ -646,6 +646,7 @@ default=None
                 "restart_scores_",
                 "restart_losses_",
                 "restart_bounded_",
+                "restart_checks_",
                 "restart_excursions_",
                 "restart_self_oscillating_",
                 "n_restarts_",
