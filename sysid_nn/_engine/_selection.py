@@ -763,8 +763,7 @@ def choose(
     (:func:`bounded_beyond_range`, :func:`surrogate_bounds`), or whose
     free runs under constant inputs within it settle far out on the wrong
     side or keep swinging (:func:`excursion_ratios` above 1), are
-    disqualified (unless all are: then those that pass every check some
-    finite run passes, and those that do not self-oscillate,
+    disqualified (unless all are: then those that do not self-oscillate,
     :func:`self_oscillating`, first), and with validation
     records those whose training loss is above the linear model's; the best
     remaining one is kept if its criterion beats the linear model's
@@ -794,19 +793,11 @@ def choose(
     ).reshape(len(runs), 3)
     finite = np.array([np.isfinite(r.criterion) for r in runs], dtype=bool)
     bounded = [bool(ok) for ok in finite & checks.all(axis=1)]
-    # Where none passes them all, a check that every finite run fails tells
-    # nothing: the others still hold (on Silverbox all six restarts failed
-    # the surrogate check, and the one chosen without the amplitude check
-    # tested at 7.65 mV on the full arrow against 0.92 for the best that
-    # passed it). Those that come to rest (or drift) before those that
-    # self-oscillate. (Holding those out where others pass took the
+    # Where none passes, those that come to rest (or drift) before those
+    # that self-oscillate. (Holding those out where others pass took the
     # oscillator's TDL at dt = 0.03 s from 0.43 to 1.09 NRMSE.)
-    telling = checks[finite].any(axis=0)
-    sound = finite & checks[:, telling].all(axis=1)
     pool = (
         [r for r, ok in zip(runs, bounded, strict=True) if ok]
-        or [r for r, ok, c in zip(runs, sound, cycling, strict=True) if ok and not c]
-        or [r for r, ok in zip(runs, sound, strict=True) if ok]
         or [r for r, c in zip(runs, cycling, strict=True) if not c]
         or runs
     )
