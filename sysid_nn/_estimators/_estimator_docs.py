@@ -254,9 +254,10 @@ validation_continues_record_ : bool or None
     state); None without validation records.
 rest_output_ : ndarray of shape (n_outputs,) or None
     The output at the model's rest, where its free run settles under zero
-    excitation (after 8192 samples of it, from where its free run over the
-    longest training record ends; user units): free runs without initial
-    conditions start there. None where the model does not settle
+    excitation (after 8192 samples of it, from the zero state or, for a
+    model with another rest its training record leads to, from there; see
+    ``rest_check_``; user units): free runs without initial conditions
+    start there. None where the model does not settle
     (an integrating or self-oscillating one) or settles outside the range
     of the training outputs; free runs then start from zero, or, for a
     model on a sustained cycle within that range, after the run-in, on its
@@ -270,13 +271,17 @@ rest_check_ : Bunch
     after the run-in), ``change`` (its largest change over the run-in's last
     2048 samples) against ``tolerance``, ``training_range`` (lowest and
     highest training output), ``run_in`` (the run-in's length),
-    ``run_in_from`` (``"training"``: the run-in starts where the free run
-    over the longest training record ends, so that a model with two rests
-    settles at the one its training records lead to; ``"zero"``: from the
-    zero state, where that finds neither a rest nor a cycle) and
+    ``run_in_from`` (``"zero"``: the run-in starts from the zero state;
+    ``"training"``: where the free run over the longest training record
+    ends, because the run-in from there found another rest than the zero
+    state's and the free run over that record fits it better started
+    there, or because only it found a rest or a cycle), and the evidence:
     ``training_start`` (what the run-in from the training record's end
     found: ``"rest"``, ``"cycle"``, ``"zero"``, or None where that free run
-    diverged).
+    diverged), ``training_end_output`` (the output at the end of that
+    run-in) and ``record_losses`` (the mean squared standardised misfit of
+    the free run over that record from each start, zero state's first,
+    where two rests were compared; else None).
 linear_score_ : float or None
     Negative selection loss of that linear model; None where it is not a
     candidate (no hidden layer, no linear part, or the ISSM's TDL start).
