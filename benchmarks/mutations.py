@@ -134,8 +134,8 @@ MUTATIONS = (
     Mutation(
         "run-in from the zero state",
         "sysid_nn/_estimators/_base.py",
-        "self._run_in_from, evidence = run_in_origin(self, fitted)",
-        "self._run_in_from, evidence = None, run_in_origin(self, fitted)[1]",
+        "self._run_in_from, *found = run_in_origin(self, fitted)",
+        "_, *found = run_in_origin(self, fitted)\n        self._run_in_from = None",
         (
             f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
             "record_leads_to",
@@ -154,8 +154,8 @@ MUTATIONS = (
     Mutation(
         "run-in: the training end by default",
         "sysid_nn/_engine/_state_estimation.py",
-        "return (origin if losses[1] < losses[0] else None), evidence",
-        "return origin, evidence",
+        "    if losses[1] < losses[0]:\n",
+        "    if True:\n",
         (
             f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
             "record_leads_to",
@@ -171,8 +171,8 @@ MUTATIONS = (
     Mutation(
         "run-in: only a rest of the zero state's",
         "sysid_nn/_engine/_state_estimation.py",
-        '    if zero.start == "zero":\n        return origin, evidence\n',
-        '    if zero.start == "zero":\n        return None, evidence\n',
+        '    if zero.start == "zero":\n        return origin, led, evidence\n',
+        '    if zero.start == "zero":\n        return None, zero, evidence\n',
         (
             f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
             "record_leads_to",
@@ -181,8 +181,8 @@ MUTATIONS = (
     Mutation(
         "simulate's run-in from the zero state",
         "sysid_nn/_estimators/_base.py",
-        "if lead and origin is not None:",
-        "if lead and origin is not None and not at_rest:",
+        "if origin is not None:  # a run-in from the training record's end",
+        "if origin is not None and not at_rest:",
         (
             f"{POLICY}::test_a_model_with_two_rests_starts_at_the_one_its_training_"
             "record_leads_to",

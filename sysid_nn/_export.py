@@ -120,7 +120,9 @@ def _tdl_matrices(est, origin) -> tuple:
 def _history_rows(est, origin) -> tuple[np.ndarray, np.ndarray]:
     """Standardised history rows of a run from ``origin`` (``(initial,
     initial_inputs)``, user units; None: zero)."""
-    initial, past = (None, None) if origin is None else ([origin[0]], [origin[1]])
+    from sysid_nn._engine._state_estimation import origin_conditions
+
+    initial, past = origin_conditions(origin, 1)
     data = est._stack([np.zeros((0, est.n_features_in_))], None, initial, past)
     return data.Y[: data.h], data.U[: data.h]
 

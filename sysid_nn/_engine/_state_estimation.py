@@ -323,7 +323,7 @@ def free_run_from(est, w: np.ndarray, origin=None, level=0.0):
     shifted by the excitation ``level``, from the initial conditions
     ``origin`` (``(initial, initial_inputs)`` in the user's units, as
     :meth:`simulate` takes them; None: zero), and whether it diverged."""
-    initial, past = (None, None) if origin is None else ([origin[0]], [origin[1]])
+    initial, past = origin_conditions(origin, 1)
 
     def free_run(X):
         data = est._stack([X + level], None, initial, past)
@@ -331,6 +331,15 @@ def free_run_from(est, w: np.ndarray, origin=None, level=0.0):
         return Yhat[data.h :], bool(diverged[0] >= 0)
 
     return free_run
+
+
+def origin_conditions(origin, n_seq: int) -> tuple:
+    """``(initial, initial_inputs)``, one of each per sequence, of ``n_seq``
+    sequences starting from ``origin`` (see :func:`free_run_from`);
+    ``(None, None)`` for the zero state."""
+    if origin is None:
+        return None, None
+    return [origin[0]] * n_seq, [origin[1]] * n_seq
 
 
 def _on_cycle(before: np.ndarray, last: np.ndarray) -> bool:
@@ -385,13 +394,14 @@ def run_in_origin(est, data: _Data) -> tuple:
     fits it better (an integrator's rests are a continuum: the training
     record's end is one of them but not where its records start). From
     the zero state otherwise: a model with one rest, or one cycle, reaches
-    it from there, as before. Returns the origin (None: the zero state) and
-    a Bunch: ``training_start`` (the start the run-in from the training
-    record's end found, None where that free run diverged),
-    ``training_end_output`` (its output at the end of that run-in,
-    standardised) and ``record_losses`` (the mean squared standardised
-    misfit of the record's free run from the zero state's run-in and from
-    the training end's, or None where they were not compared).
+    it from there, as before. Returns the origin (None: the zero state),
+    the :func:`rest_check` of the run-in from it, and a Bunch:
+    ``training_start`` (the start the run-in from the training record's
+    end found, None where that free run diverged), ``training_end_output``
+    (its output at the end of that run-in, standardised) and
+    ``record_losses`` (the mean squared standardised misfit of the record's
+    free run from the zero state's run-in and from the training end's, or
+    None where they were not compared).
     """
     origin = training_end(est, data)
     led = None if origin is None else _check_from(est, origin)
@@ -401,15 +411,15 @@ def run_in_origin(est, data: _Data) -> tuple:
         record_losses=None,
     )
     if led is None or led.start == "zero":
-        return None, evidence
+        return None, _check_from(est, None), evidence
     zero = _check_from(est, None)
     if zero.start == "zero":
-        return origin, evidence
+        return origin, led, evidence
     same = zero.start == led.start and (
         zero.start == "cycle" or np.all(np.abs(zero.end - led.end) <= _SETTLED_TOL)
     )
     if same:
-        return None, evidence
+        return None, zero, evidence
     s = _longest(data)
     a, b = data.starts[s] + data.h, data.starts[s + 1]
     X = data.U[a:b] * est._x_scale + est._x_mean
@@ -421,27 +431,32 @@ def run_in_origin(est, data: _Data) -> tuple:
         misfit = np.mean((Y[_RUN_IN:] - data.Y[a:b]) ** 2)
         losses.append(np.inf if diverged else float(misfit))
     evidence.record_losses = tuple(losses)
-    return (origin if losses[1] < losses[0] else None), evidence
+    if losses[1] < losses[0]:
+        return origin, led, evidence
+    return None, zero, evidence
 
 
-def estimator_rest_check(est, evidence: Bunch | None = None) -> Bunch:
+def estimator_rest_check(est, found: tuple | None = None) -> Bunch:
     """:func:`rest_check` of ``est``'s current weights, in the user's units
     (``rest_check_``), with where its run-in starts.
 
-    The run-in starts from ``est._run_in_from`` (see :func:`run_in_origin`)
+    ``found``: the check and evidence :func:`run_in_origin` returned for
+    the fitted weights, whose origin is ``est._run_in_from``. Without it
+    (weights changed since), the run-in starts from ``est._run_in_from``
     where that finds a rest or a cycle, else from the zero state.
-    ``evidence``: the Bunch of :func:`run_in_origin`, reported in the
-    user's units.
     """
     origin = getattr(est, "_run_in_from", None)
-    led = None if origin is None else _check_from(est, origin)
-    from_training = led is not None and led.start != "zero"
-    check = led if from_training else _check_from(est, None)
+    if found is None:
+        led = None if origin is None else _check_from(est, origin)
+        from_training = led is not None and led.start != "zero"
+        check = led if from_training else _check_from(est, None)
+        evidence = Bunch(
+            training_start=None, training_end_output=None, record_losses=None
+        )
+    else:
+        (check, evidence), from_training = found, origin is not None
     mean, scale = est._y_mean, est._y_scale
     low, high = est._y_range
-    evidence = evidence or Bunch(
-        training_start=None, training_end_output=None, record_losses=None
-    )
     end = evidence.training_end_output
     return Bunch(
         start=check.start,

@@ -52,6 +52,7 @@ from sysid_nn._engine._state_estimation import (
     _RUN_IN,
     estimator_rest_check,
     fit_initial_condition,
+    origin_conditions,
     run_in_origin,
 )
 from sysid_nn._engine._training import (
@@ -746,16 +747,16 @@ class _RecurrentRegressorBase(
         start, origin = self._run_in() if at_rest else ("zero", None)
         lead = _RUN_IN if start != "zero" else 0
         Xs = [np.concatenate([np.zeros((lead, Xi.shape[1])), Xi]) for Xi in Xs]
-        if lead and origin is not None:
-            initial, past = [origin[0]] * len(Xs), [origin[1]] * len(Xs)
+        if origin is not None:  # a run-in from the training record's end
+            initial, past = origin_conditions(origin, len(Xs))
         return Xs, np.full(len(Xs), lead, dtype=np.int64), initial, past
 
     def _find_rest(self, fitted: _Data) -> None:
         """``rest_check_`` and ``rest_output_`` of the weights, and where
         their run-in starts: see
         :func:`~sysid_nn._engine._state_estimation.run_in_origin`."""
-        self._run_in_from, evidence = run_in_origin(self, fitted)
-        self.rest_check_ = estimator_rest_check(self, evidence)
+        self._run_in_from, *found = run_in_origin(self, fitted)
+        self.rest_check_ = estimator_rest_check(self, tuple(found))
         self.rest_output_ = self.rest_check_.output
         self._rest_weights = self.coefs_.copy()  # whose rest that is
 
@@ -769,7 +770,9 @@ class _RecurrentRegressorBase(
             return "zero", None  # fitted before the range was kept: no rest
         fitted = np.array_equal(self.coefs_, self._rest_weights)
         check = self.rest_check_ if fitted else estimator_rest_check(self)
-        led = check.get("run_in_from") == "training" and check.start != "zero"
+        # ("training" only where the run-in from there found a rest or a
+        # cycle; files saved before have no run_in_from.)
+        led = check.get("run_in_from") == "training"
         return check.start, (self._run_in_from if led else None)
 
     @abstractmethod
