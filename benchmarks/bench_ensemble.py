@@ -28,6 +28,11 @@ shares put them (the ensemble's own splits moved, as ``bench_stability``
 moves a single fit's), and reports every ensemble of the five splits
 together; the single fits under moved splits are ``bench_stability``'s.
 
+``--distil`` fits every ensemble with ``distil=True`` and also scores the
+network fitted to its median (``network_``: the members, and so the
+ensembles' columns, are the same as without it); ``--no-single`` skips the
+single fits (their columns are then empty).
+
 (the defaults: about 40 CPU-minutes; ``results_ensemble.md`` also holds
 ``--only chains,oscillator --seeds 0,1,2``).
 """
@@ -64,6 +69,8 @@ WITH_X_VAL = {"oscillator"}
 def _range(values) -> str:
     """``"median (min - max), spread"`` of test errors."""
     v = np.asarray(values, dtype=float)
+    if not len(v):
+        return "-"
     if not np.all(np.isfinite(v)):
         return f"{np.median(v):.4g}, not finite in {np.sum(~np.isfinite(v))}"
     return f"{P.median_range(v, 4)}, {v.max() / v.min():.2f}"
@@ -92,13 +99,19 @@ def main(argv=None) -> None:
     parser.add_argument("--shifts", default="0", help="held-out starts moved")
     parser.add_argument("--data-home", default=None, help="data directory")
     parser.add_argument("--out", default=str(OUT), help="report file (markdown)")
+    parser.add_argument(
+        "--distil", action="store_true", help="also score each ensemble's network_"
+    )
+    parser.add_argument("--no-single", action="store_true", help="no single fits")
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
     shifts = sorted({0, *(int(s) for s in args.shifts.split(","))})
     started, loads = time.time(), [os.getloadavg()[0]]
     lines = [
         f"Command: `python benchmarks/bench_ensemble.py --only {args.only} "
-        f"--seeds {args.seeds} --shifts {args.shifts}`; {platform.machine()}, "
+        f"--seeds {args.seeds} --shifts {args.shifts}"
+        f"{' --distil' if args.distil else ''}"
+        f"{' --no-single' if args.no_single else ''}`; {platform.machine()}, "
         f"{os.cpu_count()} cores shared with other jobs, BLAS {blas_kernels()}.",
         "",
         "| system | case | network | single: median (range), spread | "
@@ -126,9 +139,10 @@ def main(argv=None) -> None:
                 )
                 moved_ensembles: dict = {}
                 moved_every: dict = {}
+                moved_networks: dict = {}
                 left_out = members = 0
                 for seed in seeds:
-                    for share in shares:
+                    for share in shares if not args.no_single else ():
                         extra = {} if share is None else {"validation_fraction": share}
                         _, test, cpu = fit_scored(
                             fit, score, network(random_state=seed, **extra)
@@ -143,11 +157,16 @@ def main(argv=None) -> None:
                             EnsembleRegressor(
                                 network(),
                                 validation_fractions=moved(n_train, shift),
+                                distil=args.distil,
                                 random_state=seed,
                             ),
                         )
                         moved_ensembles.setdefault(shift, []).append(test)
                         moved_every.setdefault(shift, []).append(_every(fitted, score))
+                        if args.distil:
+                            network_test = score(fitted.network_)
+                            moved_networks.setdefault(shift, []).append(network_test)
+
                         if shift == 0:
                             left_out += int(np.sum(~fitted.members_used_))
                             members += len(fitted.estimators_)
@@ -155,14 +174,19 @@ def main(argv=None) -> None:
                     loads.append(os.getloadavg()[0])
                     print(system, label, name, seed, single[-len(shares) :],
                           [v[-1] for v in moved_ensembles.values()],
+                          [v[-1] for v in moved_networks.values()],
                           flush=True)  # fmt: skip
                 medians = " / ".join(f"{np.median(v):.4g}" for v in per_share.values())
+                medians = medians or "-"
                 ensemble = moved_ensembles.get(0, [])
-                if len(moved_ensembles) > 1:
+                if len(moved_ensembles) > 1 or moved_networks:
                     for tag, runs in (
                         ("", moved_ensembles),
                         (", every member", moved_every),
+                        (", network_", moved_networks),
                     ):
+                        if not runs:
+                            continue
                         every = np.concatenate(list(runs.values()))
                         moved_lines.append(
                             f"| {system} | {label} | {name}{tag} | "
@@ -174,7 +198,8 @@ def main(argv=None) -> None:
                     f"{_range(ensemble)} | {_range(moved_every.get(0, []))} | "
                     f"{left_out} of {members} | "
                     f"{medians} | "
-                    f"{np.median(cpu_single):.1f} / {np.median(cpu_ensemble):.1f} |"
+                    f"{np.median(cpu_single) if single else np.nan:.1f} / "
+                    f"{np.median(cpu_ensemble):.1f} |"
                 )
     if moved_lines:
         lines += [

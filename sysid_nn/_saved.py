@@ -74,8 +74,9 @@ def check_network(estimator: Any, *, ensemble: bool = False) -> None:
     if kind is EnsembleRegressor and not ensemble:
         raise TypeError(
             "estimator must be a TDLRegressor or an ISSMRegressor, got an "
-            "EnsembleRegressor: its median is not one network; export a "
-            "member (estimators_[k]) instead."
+            "EnsembleRegressor: its median is not one network; export the "
+            "network fitted to it (fit with distil=True, then network_) or "
+            "a member (estimators_[k])."
         )
     if kind not in _estimators().values():
         allowed = (

@@ -179,3 +179,127 @@ def test_member_record_errors_are_free_runs_over_every_fitted_record():
     errors = ensemble.member_record_errors_
     level = np.sort(errors)[0]  # the lower quartile of three: the best
     np.testing.assert_array_equal(ensemble.members_used_, errors <= 3 * level)
+
+
+class _Recorder(RegressorMixin, BaseEstimator):
+    """A stand-in member: ``y = gain * u``, the gain fitted by least squares
+    and nudged by the seed; it keeps the records it was fitted to."""
+
+    def __init__(self, validation_fraction=0.2, random_state=None):
+        self.validation_fraction = validation_fraction
+        self.random_state = random_state
+
+    def fit(self, X, y, X_val=None, y_val=None):
+        self.X_, self.y_ = X, y
+        self.X_val_, self.y_val_ = X_val, y_val
+        Xs, ys = (X, y) if isinstance(X, list) else ([X], [y])
+        u = np.concatenate([np.asarray(x)[:, 0] for x in Xs])
+        t = np.concatenate([np.asarray(v) for v in ys])
+        self.gain_ = float(u @ t / (u @ u))
+        self.gain_ *= 1 + 0.1 * self.random_state / np.iinfo(np.int32).max
+        self.n_features_in_ = 1
+        return self
+
+    def simulate(self, X, **kwargs):
+        if isinstance(X, list):
+            return [self.simulate(x) for x in X]
+        return self.gain_ * np.asarray(X, dtype=float)[:, 0]
+
+    def predict(self, X, y=None, *, horizon=1):
+        return self.simulate(X)
+
+
+def _spectrum(x):
+    return np.abs(np.fft.rfft(x[:, 0] - x[:, 0].mean()))
+
+
+def test_the_distilled_network_is_fitted_to_the_median_on_records_like_its_records():
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((400, 1))
+    y = np.tanh(X[:, 0]) + 0.1 * rng.standard_normal(400)
+    ensemble = EnsembleRegressor(_Recorder(), n_members=3, distil=True, random_state=0)
+    ensemble.fit(X, y)
+    net = ensemble.network_
+    # Trained on the record and four draws like it, validated on two more,
+    # every target the median's free run.
+    assert len(net.X_) == 5 and len(net.X_val_) == 2
+    np.testing.assert_array_equal(net.X_[0], X)
+    for x, target in zip(net.X_ + net.X_val_, net.y_ + net.y_val_, strict=True):
+        np.testing.assert_array_equal(target, ensemble.simulate(x))
+    assert not np.allclose(net.y_[0], y)  # the median's run, not the record
+    draws = net.X_[1:] + net.X_val_
+    for k, x in enumerate(draws):
+        assert x.shape == X.shape and not np.allclose(x, X)
+        assert X.min() <= x.min() and x.max() <= X.max()
+        assert x.mean() == pytest.approx(X.mean(), abs=0.02)
+        assert np.corrcoef(_spectrum(x), _spectrum(X))[0, 1] > 0.9
+        assert not any(np.allclose(x, other) for other in draws[k + 1 :])
+    # How far the network is from the median, over its validation draws.
+    median = np.concatenate([ensemble.simulate(x) for x in net.X_val_])
+    copied = np.concatenate([net.simulate(x) for x in net.X_val_])
+    assert ensemble.network_median_error_ == pytest.approx(
+        np.sqrt(np.mean(((copied - median) / median.std()) ** 2)), rel=1e-12
+    )
+    assert 0 < ensemble.network_median_error_ < 0.2
+    assert ensemble.network_record_error_ == pytest.approx(
+        np.sqrt(np.mean(((net.simulate(X) - y) / y.std()) ** 2)), rel=1e-12
+    )
+    # Distilling changes no member; the network has a seed of its own, and
+    # the whole is reproducible.
+    plain = clone(ensemble).set_params(distil=False).fit(X, y)
+    assert not hasattr(plain, "network_")
+    assert [m.gain_ for m in plain.estimators_] == [
+        m.gain_ for m in ensemble.estimators_
+    ]
+    assert net.random_state not in ensemble.member_random_states_
+    again = clone(ensemble).fit(X, y).network_
+    for a, b in zip(again.X_ + again.X_val_, net.X_ + net.X_val_, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_the_distilled_network_learns_the_validation_records_too():
+    rng = np.random.default_rng(1)
+    Xs = [rng.standard_normal((200, 1)), rng.standard_normal((300, 1))]
+    ys = [x[:, 0] for x in Xs]
+    Xv, yv = rng.standard_normal((150, 1)), np.zeros(150)
+    ensemble = EnsembleRegressor(_Recorder(), n_members=2, distil=True, random_state=0)
+    ensemble.fit(Xs, ys, X_val=Xv, y_val=yv)
+    net = ensemble.network_
+    # The records, X_val, and four draws like each training record.
+    assert len(net.X_) == 3 + 4 * 2 and len(net.X_val_) == 2 * 2
+    for given, x in zip([*Xs, Xv], net.X_[:3], strict=True):
+        np.testing.assert_array_equal(given, x)
+    assert [len(x) for x in net.X_[3:]] == [200, 300] * 4
+
+
+def test_distilling_a_median_that_diverges_is_refused():
+    X, y = _record(0)
+
+    class _Diverging(_Recorder):
+        def simulate(self, X, **kwargs):
+            return np.full(len(X), np.nan)
+
+    ensemble = EnsembleRegressor(_Diverging(), n_members=2, distil=True)
+    with pytest.raises(ValueError, match="distil=True needs the median's free runs"):
+        ensemble.fit(X, y)
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+def test_a_distilled_network_is_a_network_the_file_keeps(tmp_path):
+    from sysid_nn import load_model, save_model
+
+    X, y = _record(0)
+    ensemble = EnsembleRegressor(_net(), n_members=2, distil=True, random_state=0)
+    ensemble.fit(X, y)
+    assert isinstance(ensemble.network_, TDLRegressor)
+    assert ensemble.network_.n_features_in_ == 1
+    save_model(ensemble, tmp_path / "e.sysid")
+    loaded = load_model(tmp_path / "e.sysid")
+    np.testing.assert_array_equal(
+        loaded.network_.simulate(X), ensemble.network_.simulate(X)
+    )
+    np.testing.assert_array_equal(loaded.simulate(X), ensemble.simulate(X))
+    save_model(ensemble.network_, tmp_path / "n.sysid")
+    np.testing.assert_array_equal(
+        load_model(tmp_path / "n.sysid").simulate(X), ensemble.network_.simulate(X)
+    )

@@ -593,20 +593,33 @@ def _peak(est, w: np.ndarray, data) -> float:
 
 def surrogate_excitation(train, rng: np.random.Generator):
     """``train`` with each sequence's modelled excitation rows replaced by a
-    record like them: their Fourier phases drawn anew (one draw for every
-    channel, so cross-spectra stay), the amplitude spectrum and mean kept,
-    clipped to each channel's range in the sequence."""
+    record like them (:func:`like_record`)."""
     U = train.U.copy()
     for a, b in _segments(train.starts, train.h):
-        u = train.U[a:b]
-        spectrum = np.fft.rfft(u - u.mean(axis=0), axis=0)
-        turn = np.exp(2j * np.pi * rng.random(len(spectrum)))
-        turn[0] = 1.0
-        if (b - a) % 2 == 0:
-            turn[-1] = 1.0  # the Nyquist term stays real
-        drawn = np.fft.irfft(spectrum * turn[:, None], n=b - a, axis=0)
-        U[a:b] = np.clip(drawn + u.mean(axis=0), u.min(axis=0), u.max(axis=0))
+        U[a:b] = like_record(train.U[a:b], rng)
     return replace(train, U=U)
+
+
+def like_record(u: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A record like ``u`` (samples along the first axis): its Fourier
+    phases drawn anew (one draw for every channel, so cross-spectra stay),
+    the amplitude spectrum and mean kept, clipped to each channel's range.
+
+    Examples
+    --------
+    >>> u = np.sin(np.arange(64.0))[:, None]
+    >>> v = like_record(u, np.random.default_rng(0))
+    >>> v.shape, bool(np.all(np.abs(v) <= np.abs(u).max()))
+    ((64, 1), True)
+    """
+    spectrum = np.fft.rfft(u - u.mean(axis=0), axis=0)
+    turn = np.exp(2j * np.pi * rng.random(len(spectrum)))
+    turn[0] = 1.0
+    if len(u) % 2 == 0:
+        turn[-1] = 1.0  # the Nyquist term stays real
+    turn = turn.reshape(-1, *([1] * (u.ndim - 1)))
+    drawn = np.fft.irfft(spectrum * turn, n=len(u), axis=0)
+    return np.clip(drawn + u.mean(axis=0), u.min(axis=0), u.max(axis=0))
 
 
 def surrogate_bounds(est, train, linear) -> list:

@@ -12,6 +12,12 @@ records it was fitted to far more than most members' do is left out of the
 median: on EMPS, members holding out the last 25-30 % of the record can
 miss that record, and the test record, three to seven times worse than the
 rest.
+
+The median is not itself a network. With ``distil=True`` the ensemble also
+trains one network to reproduce it (``network_``), in the manner of model
+compression (Bucilua, Caruana and Niculescu-Mizil, 2006): a clone of the
+estimator fitted to the median's free runs over the training records and
+over excitations like them, and validated on further such excitations.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ from sklearn.utils import check_random_state
 from sklearn.utils._param_validation import HasMethods, Interval
 from sklearn.utils.validation import check_is_fitted
 
+from sysid_nn._engine._selection import like_record
 from sysid_nn._estimators._base import _RecordsRegressorTags, free_run_r2
 from sysid_nn._estimators._estimator_docs import document_estimator
 from sysid_nn._records._data import is_sequence_list
@@ -34,6 +41,12 @@ __all__ = ["EnsembleRegressor"]
 #: Errors over the fitted records (scaled by the outputs' spread) below this
 #: are rounding: members that fit the records exactly differ by less.
 _ROUNDING_ERROR = 1e-9
+
+#: Draws of excitations like the training records the distilled network is
+#: trained on, besides the records themselves, and validated on
+#: (``benchmarks/results_ensemble.md``, "One network distilled").
+_DISTIL_TRAINING_DRAWS = 4
+_DISTIL_VALIDATION_DRAWS = 2
 
 
 class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
@@ -68,8 +81,17 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         this multiple of the members' lower quartile (of eight members, the
         second best: one member that fits the records exceptionally well
         does not set the level); None: every member enters.
+    distil : bool, default=False
+        Also fit one network to the median (``network_``): a clone of
+        ``estimator`` trained on the median's free runs from rest over the
+        training records, ``X_val`` and four excitations like every training
+        record (its Fourier phases drawn anew, the amplitude spectrum, mean
+        and range kept), and validated on two more such draws. It costs
+        about as much as a fit to five times the training records. The
+        structural readouts, the bands, saving and export apply to it.
     random_state : int, RandomState instance or None, default=None
-        Draws the members' seeds.
+        Draws the members' seeds, and the distilled network's seed and
+        excitations.
 
     Attributes
     ----------
@@ -86,6 +108,15 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         ``inf`` where the run is not finite.
     members_used_ : ndarray of bool of shape (n_members,)
         Which members enter the median (see ``max_error_ratio``).
+    network_ : TDLRegressor or ISSMRegressor
+        With ``distil=True``: the network fitted to the median.
+    network_record_error_ : float
+        With ``distil=True``: ``network_``'s error over the fitted records,
+        measured as ``member_record_errors_``.
+    network_median_error_ : float
+        With ``distil=True``: how far ``network_``'s free runs are from the
+        median's on the excitations it was validated on (root-mean-square
+        difference, each output scaled by the median's standard deviation).
     n_features_in_ : int
         Number of excitation channels.
 
@@ -98,7 +129,8 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
     The median of the members' runs is not itself a network: the structural
     readouts (:func:`~sysid_nn.modal_parameters`, :func:`~sysid_nn.backbone`),
     the bands (``return_std``), saving and export apply to the members
-    (``estimators_``). Over ``random_state`` 0-4, single default ISSM fits
+    (``estimators_``), or, with ``distil=True``, to the network fitted to
+    the median (``network_``). Over ``random_state`` 0-4, single default ISSM fits
     holding out 15-30 % of the record tested at 0.53-1.13 V on the Cascaded
     Tanks benchmark and 1.9-10.1 mm on EMPS, ensembles of eight at
     0.54-0.57 V and 1.9-3.2 mm (``benchmarks/results_ensemble.md``).
@@ -123,6 +155,7 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         "n_members": [Interval(numbers.Integral, 1, None, closed="left")],
         "validation_fractions": ["array-like"],
         "max_error_ratio": [None, Interval(numbers.Real, 1, None, closed="left")],
+        "distil": ["boolean"],
         "random_state": ["random_state"],
     }
 
@@ -133,12 +166,14 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         n_members: int = 8,
         validation_fractions=(0.15, 0.2, 0.25, 0.3),
         max_error_ratio: float | None = 3.0,
+        distil: bool = False,
         random_state=None,
     ):
         self.estimator = estimator
         self.n_members = n_members
         self.validation_fractions = validation_fractions
         self.max_error_ratio = max_error_ratio
+        self.distil = distil
         self.random_state = random_state
 
     def fit(self, X, y, *, X_val=None, y_val=None):
@@ -192,7 +227,42 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         errors = np.array([_record_error(m, records) for m in members])
         self.member_record_errors_ = errors
         self.members_used_ = _used(errors, self.max_error_ratio)
+        if self.distil:
+            # Drawn after the members' seeds: distilling changes no member.
+            seed = int(rng.randint(np.iinfo(np.int32).max))
+            self._fit_network(base, X, X_val, seed)
+            self.network_record_error_ = _record_error(self.network_, records)
         return self
+
+    def _fit_network(self, base, X, X_val, seed: int) -> None:
+        """Fit ``network_`` to the median's free runs (see ``distil``)."""
+        given = _as_records(X) + ([] if X_val is None else _as_records(X_val))
+        rng = np.random.default_rng(seed)
+        draws = [
+            [like_record(x, rng) for x in _as_records(X)]
+            for _ in range(_DISTIL_TRAINING_DRAWS + _DISTIL_VALIDATION_DRAWS)
+        ]
+        given_y = [self.simulate(x) for x in given]
+        # A draw under which the median diverges is left out; the records
+        # themselves cannot be.
+        train, train_y = _finite_runs(
+            self, [x for d in draws[:_DISTIL_TRAINING_DRAWS] for x in d]
+        )
+        val, val_y = _finite_runs(
+            self, [x for d in draws[_DISTIL_TRAINING_DRAWS:] for x in d]
+        )
+        if not val or not all(np.all(np.isfinite(r)) for r in given_y):
+            raise ValueError(
+                "distil=True needs the median's free runs to be finite over "
+                "the fitted records and excitations like them; every member "
+                "diverged there (member_record_errors_). Fit with "
+                "distil=False, or give longer records or another estimator."
+            )
+        network = clone(base).set_params(random_state=seed)
+        self.network_ = network.fit(
+            given + train, given_y + train_y, X_val=val, y_val=val_y
+        )
+        self.network_median_error_ = _run_error(self.network_, val, val_y)
 
     def simulate(self, X, **kwargs):
         """Free-run simulation: the median of the members' at every sample.
@@ -261,20 +331,53 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         return free_run_r2(self.predict(X), y, sample_weight)
 
 
+def _as_records(X) -> list:
+    """``X`` as a list of float arrays, one per record."""
+    records = X if is_sequence_list(X) else [X]
+    return [np.asarray(x, dtype=float) for x in records]
+
+
+def _finite_runs(ensemble, records: list) -> tuple[list, list]:
+    """The records over which the ensemble's median free run is finite, and
+    those runs."""
+    runs = [ensemble.simulate(x) for x in records]
+    kept = [k for k, r in enumerate(runs) if np.all(np.isfinite(r))]
+    return [records[k] for k in kept], [runs[k] for k in kept]
+
+
 def _record_error(member, records) -> float:
     """Root-mean-square error of ``member``'s free runs from rest over
     ``records`` (``(X, y)`` pairs), each output scaled by its standard
     deviation over them; ``inf`` where a run is not finite."""
-    errors, measured = [], []
+    runs, measured = [], []
     for X, y in records:
         with np.errstate(all="ignore"):
             run = member.simulate(X)
-        parts = zip(run, y, strict=True) if is_sequence_list(y) else [(run, y)]
-        for r, m in parts:
-            m = np.asarray(m, dtype=float)
-            m = m.reshape(m.shape[0], -1)
-            errors.append(np.asarray(r, dtype=float).reshape(m.shape) - m)
+        pairs = zip(run, y, strict=True) if is_sequence_list(y) else [(run, y)]
+        for r, m in pairs:
+            runs.append(r)
             measured.append(m)
+    return _run_error_of(runs, measured)
+
+
+def _run_error(network, records: list, targets: list) -> float:
+    """:func:`_record_error` of ``network`` against ``targets`` over the
+    excitations ``records``."""
+    with np.errstate(all="ignore"):
+        runs = [network.simulate(x) for x in records]
+    return _run_error_of(runs, targets)
+
+
+def _run_error_of(runs: list, targets: list) -> float:
+    """Root-mean-square difference of ``runs`` from ``targets`` (lists of
+    arrays), each output scaled by the targets' standard deviation; ``inf``
+    where a run is not finite."""
+    errors, measured = [], []
+    for r, m in zip(runs, targets, strict=True):
+        m = np.asarray(m, dtype=float)
+        m = m.reshape(m.shape[0], -1)
+        errors.append(np.asarray(r, dtype=float).reshape(m.shape) - m)
+        measured.append(m)
     error, measured = np.concatenate(errors), np.concatenate(measured)
     if not np.all(np.isfinite(error)):
         return np.inf
