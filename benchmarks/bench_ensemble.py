@@ -31,7 +31,8 @@ together; the single fits under moved splits are ``bench_stability``'s.
 ``--distil`` fits every ensemble with ``distil=True`` and also scores the
 network fitted to its median (``network_``: the members, and so the
 ensembles' columns, are the same as without it); ``--no-single`` skips the
-single fits (their columns are then empty).
+single fits (their columns are then empty); ``--networks issm`` fits the
+ISSM alone.
 
 (the defaults: about 40 CPU-minutes; ``results_ensemble.md`` also holds
 ``--only chains,oscillator --seeds 0,1,2``).
@@ -103,6 +104,7 @@ def main(argv=None) -> None:
         "--distil", action="store_true", help="also score each ensemble's network_"
     )
     parser.add_argument("--no-single", action="store_true", help="no single fits")
+    parser.add_argument("--networks", default="tdl,issm", help="tdl, issm or both")
     args = parser.parse_args(argv)
     seeds = [int(s) for s in args.seeds.split(",")]
     shifts = sorted({0, *(int(s) for s in args.shifts.split(","))})
@@ -111,7 +113,9 @@ def main(argv=None) -> None:
         f"Command: `python benchmarks/bench_ensemble.py --only {args.only} "
         f"--seeds {args.seeds} --shifts {args.shifts}"
         f"{' --distil' if args.distil else ''}"
-        f"{' --no-single' if args.no_single else ''}`; {platform.machine()}, "
+        f"{' --no-single' if args.no_single else ''}"
+        f"{'' if args.networks == 'tdl,issm' else ' --networks ' + args.networks}`; "
+        f"{platform.machine()}, "
         f"{os.cpu_count()} cores shared with other jobs, BLAS {blas_kernels()}.",
         "",
         "| system | case | network | single: median (range), spread | "
@@ -130,6 +134,8 @@ def main(argv=None) -> None:
             if label.startswith("split"):
                 continue  # the field records' default protocol only
             for name, network in NETWORKS.items():
+                if network.__name__[:-9].lower() not in args.networks.split(","):
+                    continue
                 single, per_share, ensemble, cpu_single, cpu_ensemble = (
                     [],
                     {},

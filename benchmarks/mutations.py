@@ -696,6 +696,56 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "distil: the network not trained on the records themselves",
+        "sysid_nn/_estimators/_ensemble.py",
+        "given + train, given_y + train_y, X_val=val",
+        "train, train_y, X_val=val",
+        (
+            "tests/test_ensemble.py::"
+            "test_the_distilled_network_is_fitted_to_the_median_on_records_like_its_records",
+        ),
+    ),
+    Mutation(
+        "distil: no draws like the records",
+        "sysid_nn/_estimators/_ensemble.py",
+        "[x for d in draws[:_DISTIL_TRAINING_DRAWS] for x in d]",
+        "[x for d in draws[:0] for x in d]",
+        (
+            "tests/test_ensemble.py::"
+            "test_the_distilled_network_is_fitted_to_the_median_on_records_like_its_records",
+        ),
+    ),
+    Mutation(
+        "distil: validated on the draws it was trained on",
+        "sysid_nn/_estimators/_ensemble.py",
+        "[x for d in draws[_DISTIL_TRAINING_DRAWS:] for x in d]",
+        "[x for d in draws[:_DISTIL_VALIDATION_DRAWS] for x in d]",
+        (
+            "tests/test_ensemble.py::"
+            "test_the_distilled_network_is_fitted_to_the_median_on_records_like_its_records",
+        ),
+    ),
+    Mutation(
+        "distil: the network's seed a member's",
+        "sysid_nn/_estimators/_ensemble.py",
+        "seed = int(rng.randint(np.iinfo(np.int32).max))",
+        "seed = int(seeds[0])",
+        (
+            "tests/test_ensemble.py::"
+            "test_the_distilled_network_is_fitted_to_the_median_on_records_like_its_records",
+        ),
+    ),
+    Mutation(
+        "distil: the draws of the validation records too",
+        "sysid_nn/_estimators/_ensemble.py",
+        "[like_record(x, rng) for x in _as_records(X)]",
+        "[like_record(x, rng) for x in given]",
+        (
+            "tests/test_ensemble.py::"
+            "test_the_distilled_network_learns_the_validation_records_too",
+        ),
+    ),
+    Mutation(
         "ensemble median over every member",
         "sysid_nn/_estimators/_ensemble.py",
         "zip(self.estimators_, used, strict=True) if u]",
