@@ -146,6 +146,7 @@ def main(argv=None) -> None:
                 moved_ensembles: dict = {}
                 moved_every: dict = {}
                 moved_networks: dict = {}
+                disagreements: list = []
                 left_out = members = 0
                 for seed in seeds:
                     for share in shares if not args.no_single else ():
@@ -172,6 +173,7 @@ def main(argv=None) -> None:
                         if args.distil:
                             network_test = score(fitted.network_)
                             moved_networks.setdefault(shift, []).append(network_test)
+                            disagreements.append(fitted.draw_disagreement_)
 
                         if shift == 0:
                             left_out += int(np.sum(~fitted.members_used_))
@@ -181,6 +183,7 @@ def main(argv=None) -> None:
                     print(system, label, name, seed, single[-len(shares) :],
                           [v[-1] for v in moved_ensembles.values()],
                           [v[-1] for v in moved_networks.values()],
+                          disagreements[-len(moved_networks):],
                           flush=True)  # fmt: skip
                 medians = " / ".join(f"{np.median(v):.4g}" for v in per_share.values())
                 medians = medians or "-"
@@ -189,7 +192,12 @@ def main(argv=None) -> None:
                     for tag, runs in (
                         ("", moved_ensembles),
                         (", every member", moved_every),
-                        (", network_", moved_networks),
+                        (
+                            ", network_ (draw_disagreement_ "
+                            f"{min(disagreements, default=0):.2g}-"
+                            f"{max(disagreements, default=0):.2g})",
+                            moved_networks,
+                        ),
                     ):
                         if not runs:
                             continue

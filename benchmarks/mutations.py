@@ -746,6 +746,26 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "distil: members parting off the records not warned of",
+        "sysid_nn/_estimators/_ensemble.py",
+        "if self.draw_disagreement_ > _DISAGREEMENT_WARNING:",
+        "if self.draw_disagreement_ > 10 * _DISAGREEMENT_WARNING:",
+        (
+            "tests/test_ensemble.py::"
+            "test_members_that_part_off_the_records_are_warned_of",
+        ),
+    ),
+    Mutation(
+        "distil: disagreement on the draws alone",
+        "sysid_nn/_estimators/_ensemble.py",
+        "_distance(used, given, given_y), _ROUNDING_ERROR",
+        "0.1, _ROUNDING_ERROR",
+        (
+            "tests/test_ensemble.py::"
+            "test_the_distilled_network_is_fitted_to_the_median_on_records_like_its_records",
+        ),
+    ),
+    Mutation(
         "ensemble median over every member",
         "sysid_nn/_estimators/_ensemble.py",
         "zip(self.estimators_, used, strict=True) if u]",

@@ -1,6 +1,8 @@
 """EnsembleRegressor: members on their own seeds and held-out shares, and
 the pointwise median of their runs."""
 
+import warnings
+
 import numpy as np
 import pytest
 from sklearn.base import BaseEstimator, RegressorMixin, clone
@@ -241,6 +243,20 @@ def test_the_distilled_network_is_fitted_to_the_median_on_records_like_its_recor
         np.sqrt(np.mean(((copied - median) / median.std()) ** 2)), rel=1e-12
     )
     assert 0 < ensemble.network_median_error_ < 0.2
+    # Linear members part from the median alike on any excitation.
+    parted = [
+        np.concatenate([m.simulate(x) for x in xs]) - np.concatenate(ts)
+        for m in ensemble.estimators_
+        for xs, ts in ((net.X_val_, net.y_val_), ([X], [net.y_[0]]))
+    ]
+    scales = (median.std(), net.y_[0].std())
+    distance = [
+        np.sqrt(np.mean((p / scales[k % 2]) ** 2)) for k, p in enumerate(parted)
+    ]
+    assert ensemble.draw_disagreement_ == pytest.approx(
+        np.median(distance[0::2]) / np.median(distance[1::2]), rel=1e-12
+    )
+    assert 0.8 < ensemble.draw_disagreement_ < 1.2
     assert ensemble.network_record_error_ == pytest.approx(
         np.sqrt(np.mean(((net.simulate(X) - y) / y.std()) ** 2)), rel=1e-12
     )
@@ -303,3 +319,49 @@ def test_a_distilled_network_is_a_network_the_file_keeps(tmp_path):
     np.testing.assert_array_equal(
         load_model(tmp_path / "n.sysid").simulate(X), ensemble.network_.simulate(X)
     )
+
+
+class _PartsOffTheRecord(_Recorder):
+    """Members that agree on the record they were fitted to and part, by a
+    term of their own seed, wherever the excitation leaves it."""
+
+    def fit(self, X, y, X_val=None, y_val=None):
+        self.record_ = np.asarray(X, dtype=float)[:, 0]
+        return super().fit(X, y, X_val, y_val)
+
+    def simulate(self, X, **kwargs):
+        if isinstance(X, list):
+            return [self.simulate(x) for x in X]
+        u = np.asarray(X, dtype=float)[:, 0]
+        off = u - self.record_ if len(u) == len(self.record_) else u
+        return u + 0.01 * self.gain_ + self.random_state / 1e9 * off
+
+
+def test_members_that_part_off_the_records_are_warned_of(monkeypatch):
+    from sysid_nn._estimators import _ensemble
+
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((400, 1))
+    y = X[:, 0].copy()
+    ensemble = EnsembleRegressor(
+        _PartsOffTheRecord(), n_members=3, distil=True, random_state=0
+    )
+    with pytest.warns(UserWarning, match=r"part \d+\.\d times more under excitations"):
+        ensemble.fit(X, y)
+    ratio = ensemble.draw_disagreement_
+    assert ratio > 5
+    # Warned just where the ratio is above the limit.
+    monkeypatch.setattr(_ensemble, "_DISAGREEMENT_WARNING", 1.01 * ratio)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        clone(ensemble).fit(X, y)
+    monkeypatch.setattr(_ensemble, "_DISAGREEMENT_WARNING", 0.99 * ratio)
+    with pytest.warns(UserWarning, match="draw_disagreement_"):
+        clone(ensemble).fit(X, y)
+    # Members that agree wherever they run: no warning at the default.
+    monkeypatch.undo()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        EnsembleRegressor(_Recorder(), n_members=3, distil=True, random_state=0).fit(
+            X, y
+        )
