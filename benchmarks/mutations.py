@@ -728,8 +728,8 @@ MUTATIONS = (
     Mutation(
         "distil: the network's seed a member's",
         "sysid_nn/_estimators/_ensemble.py",
-        "seed = int(rng.randint(np.iinfo(np.int32).max))",
-        "seed = int(seeds[0])",
+        "attempts = rng.randint(np.iinfo(np.int32).max, size=_NETWORK_ATTEMPTS)",
+        "attempts = seeds[:_NETWORK_ATTEMPTS]",
         (
             "tests/test_ensemble.py::"
             "test_the_distilled_network_is_fitted_to_the_median_on_records_like_its_records",
@@ -763,6 +763,26 @@ MUTATIONS = (
         (
             "tests/test_ensemble.py::"
             "test_the_distilled_network_is_fitted_to_the_median_on_records_like_its_records",
+        ),
+    ),
+    Mutation(
+        "distil: one attempt whatever the network fits",
+        "sysid_nn/_estimators/_ensemble.py",
+        "            if _within(errors[-1], level, self.max_error_ratio):\n",
+        "            if True:\n",
+        (
+            "tests/test_ensemble.py::"
+            "test_a_network_that_misses_the_records_is_fitted_again_on_another_seed",
+        ),
+    ),
+    Mutation(
+        "distil: the last attempt kept",
+        "sysid_nn/_estimators/_ensemble.py",
+        "best = int(np.argmin(self.network_record_errors_))",
+        "best = len(errors) - 1",
+        (
+            "tests/test_ensemble.py::"
+            "test_a_network_that_misses_the_records_is_fitted_again_on_another_seed",
         ),
     ),
     Mutation(

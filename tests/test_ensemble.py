@@ -6,6 +6,7 @@ import warnings
 import numpy as np
 import pytest
 from sklearn.base import BaseEstimator, RegressorMixin, clone
+from sklearn.utils import check_random_state
 from sklearn.utils.estimator_checks import parametrize_with_checks
 from test_tdl import ROW_ORDER_CHECKS
 
@@ -354,6 +355,8 @@ def test_members_that_part_off_the_records_are_warned_of(monkeypatch):
     monkeypatch.setattr(_ensemble, "_DISAGREEMENT_WARNING", 1.01 * ratio)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
+        # This stand-in's network misses the records: warned of too.
+        warnings.filterwarnings("ignore", "The network fitted")
         clone(ensemble).fit(X, y)
     monkeypatch.setattr(_ensemble, "_DISAGREEMENT_WARNING", 0.99 * ratio)
     with pytest.warns(UserWarning, match="draw_disagreement_"):
@@ -363,5 +366,58 @@ def test_members_that_part_off_the_records_are_warned_of(monkeypatch):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         EnsembleRegressor(_Recorder(), n_members=3, distil=True, random_state=0).fit(
-            X, y
+            X, y + 0.5 * rng.standard_normal(400)
         )
+
+
+class _OddSeedsMiss(_Recorder):
+    """A stand-in whose networks fitted to a median (with ``X_val``) on an
+    odd seed miss the records five times."""
+
+    def fit(self, X, y, X_val=None, y_val=None):
+        super().fit(X, y, X_val, y_val)
+        if X_val is not None and self.random_state % 2:
+            self.gain_ *= 5
+        return self
+
+
+def _network_seeds(random_state, n_members):
+    rng = check_random_state(random_state)
+    rng.randint(np.iinfo(np.int32).max, size=n_members)
+    return rng.randint(np.iinfo(np.int32).max, size=3)
+
+
+def test_a_network_that_misses_the_records_is_fitted_again_on_another_seed():
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((400, 1))
+    y = X[:, 0] + 0.5 * rng.standard_normal(400)
+    parity = {k: tuple(_network_seeds(k, 3) % 2) for k in range(40)}
+    # The first network misses, the second fits: two attempts, the second kept.
+    k = next(k for k, p in parity.items() if p[:2] == (1, 0))
+    ensemble = EnsembleRegressor(_OddSeedsMiss(), n_members=3, distil=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ensemble.set_params(random_state=k).fit(X, y)
+    errors, level = (
+        ensemble.network_record_errors_,
+        np.sort(ensemble.member_record_errors_)[0],
+    )
+    assert len(errors) == 2 and errors[0] > 3 * level >= errors[1]
+    assert ensemble.network_.random_state == _network_seeds(k, 3)[1]
+    assert ensemble.network_record_error_ == errors[1]
+    # The first fits: one attempt.
+    k = next(k for k, p in parity.items() if p[0] == 0)
+    assert (
+        len(clone(ensemble).set_params(random_state=k).fit(X, y).network_record_errors_)
+        == 1
+    )
+    # Every attempt misses: the best kept, and warned.
+    k = next(k for k, p in parity.items() if p == (1, 1, 1))
+    with pytest.warns(UserWarning, match="network_record_errors_"):
+        missed = clone(ensemble).set_params(random_state=k).fit(X, y)
+    assert len(missed.network_record_errors_) == 3
+    assert missed.network_record_error_ == missed.network_record_errors_.min()
+    # max_error_ratio=None: the first network, whatever it fits.
+    k = next(k for k, p in parity.items() if p[0] == 1)
+    every = clone(ensemble).set_params(random_state=k, max_error_ratio=None)
+    assert len(every.fit(X, y).network_record_errors_) == 1
