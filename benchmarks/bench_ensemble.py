@@ -147,6 +147,7 @@ def main(argv=None) -> None:
                 moved_every: dict = {}
                 moved_networks: dict = {}
                 disagreements: list = []
+                attempts: list = []
                 left_out = members = 0
                 for seed in seeds:
                     for share in shares if not args.no_single else ():
@@ -174,6 +175,7 @@ def main(argv=None) -> None:
                             network_test = score(fitted.network_)
                             moved_networks.setdefault(shift, []).append(network_test)
                             disagreements.append(fitted.draw_disagreement_)
+                            attempts.append(len(fitted.network_record_errors_))
 
                         if shift == 0:
                             left_out += int(np.sum(~fitted.members_used_))
@@ -184,6 +186,7 @@ def main(argv=None) -> None:
                           [v[-1] for v in moved_ensembles.values()],
                           [v[-1] for v in moved_networks.values()],
                           disagreements[-len(moved_networks):],
+                          attempts[-len(moved_networks):],
                           flush=True)  # fmt: skip
                 medians = " / ".join(f"{np.median(v):.4g}" for v in per_share.values())
                 medians = medians or "-"
@@ -195,7 +198,8 @@ def main(argv=None) -> None:
                         (
                             ", network_ (draw_disagreement_ "
                             f"{min(disagreements, default=0):.2g}-"
-                            f"{max(disagreements, default=0):.2g})",
+                            f"{max(disagreements, default=0):.2g}; fitted again "
+                            f"in {sum(a > 1 for a in attempts)} of {len(attempts)})",
                             moved_networks,
                         ),
                     ):
