@@ -97,9 +97,11 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         ``estimator`` trained on the median's free runs from rest over the
         training records, ``X_val`` and four excitations like every training
         record (its Fourier phases drawn anew, the amplitude spectrum, mean
-        and range kept), and validated on two more such draws. It costs
-        about as much as a fit to five times the training records. The
-        structural readouts, the bands, saving and export apply to it.
+        and range kept), and validated on two more such draws; fitted again
+        on another seed (up to three times) where it misses the records
+        more than ``max_error_ratio`` allows a member. It costs about as
+        much as a fit to five times the training records. The structural
+        readouts, the bands, saving and export apply to it.
     random_state : int, RandomState instance or None, default=None
         Draws the members' seeds, and the distilled network's seed and
         excitations.
@@ -124,6 +126,12 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
     network_record_error_ : float
         With ``distil=True``: ``network_``'s error over the fitted records,
         measured as ``member_record_errors_``.
+    network_record_errors_ : ndarray of shape (n_attempts,)
+        With ``distil=True``: the error over the fitted records of every
+        network fitted to the median, in turn on new seeds until one was
+        within ``max_error_ratio`` times the members' lower quartile (at
+        most three); ``network_`` is the one of the smallest (warned where
+        none was within).
     network_median_error_ : float
         With ``distil=True``: how far ``network_``'s free runs are from the
         median's on the excitations it was validated on (root-mean-square
@@ -259,28 +267,9 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         """Fit ``network_`` to the median's free runs (see ``distil``): a
         network on each of ``seeds`` in turn until one fits ``records`` as
         a member must to enter the median; the best of them kept."""
-        given = _as_records(X) + ([] if X_val is None else _as_records(X_val))
-        rng = np.random.default_rng(seeds[0])
-        draws = [
-            [like_record(x, rng) for x in _as_records(X)]
-            for _ in range(_DISTIL_TRAINING_DRAWS + _DISTIL_VALIDATION_DRAWS)
-        ]
-        given_y = [self.simulate(x) for x in given]
-        # A draw under which the median diverges is left out; the records
-        # themselves cannot be.
-        train, train_y = _finite_runs(
-            self, [x for d in draws[:_DISTIL_TRAINING_DRAWS] for x in d]
+        given, given_y, train, train_y, val, val_y = self._distillation_records(
+            X, X_val, seeds[0]
         )
-        val, val_y = _finite_runs(
-            self, [x for d in draws[_DISTIL_TRAINING_DRAWS:] for x in d]
-        )
-        if not val or not all(np.all(np.isfinite(r)) for r in given_y):
-            raise ValueError(
-                "distil=True needs the median's free runs to be finite over "
-                "the fitted records and excitations like them; every member "
-                "diverged there (member_record_errors_). Fit with "
-                "distil=False, or give longer records or another estimator."
-            )
         level = np.quantile(self.member_record_errors_, 0.25, method="lower")
         networks, errors = [], []
         for seed in seeds:
@@ -298,8 +287,8 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         if not _within(errors[best], level, self.max_error_ratio):
             warnings.warn(
                 f"The network fitted to the ensemble's median (network_) fits "
-                f"the records {errors[best] / level:.1f} times worse than the "
-                "members' lower quartile after "
+                f"the records {errors[best] / max(level, _ROUNDING_ERROR):.1f} "
+                f"times worse than the members' lower quartile after "
                 f"{len(errors)} attempts (network_record_errors_), more than "
                 "max_error_ratio allows a member. Use the ensemble's median, "
                 "or a member.",
@@ -321,6 +310,34 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
                 UserWarning,
                 stacklevel=user_stacklevel(),
             )
+
+    def _distillation_records(self, X, X_val, seed: int) -> tuple:
+        """The excitations ``network_`` is trained and validated on, with
+        the median's free runs over them: ``(given, given_y, train,
+        train_y, val, val_y)``; ``given`` are the fitted records."""
+        given = _as_records(X) + ([] if X_val is None else _as_records(X_val))
+        rng = np.random.default_rng(seed)
+        draws = [
+            [like_record(x, rng) for x in _as_records(X)]
+            for _ in range(_DISTIL_TRAINING_DRAWS + _DISTIL_VALIDATION_DRAWS)
+        ]
+        given_y = [self.simulate(x) for x in given]
+        # A draw under which the median diverges is left out; the records
+        # themselves cannot be.
+        train, train_y = _finite_runs(
+            self, [x for d in draws[:_DISTIL_TRAINING_DRAWS] for x in d]
+        )
+        val, val_y = _finite_runs(
+            self, [x for d in draws[_DISTIL_TRAINING_DRAWS:] for x in d]
+        )
+        if not val or not all(np.all(np.isfinite(r)) for r in given_y):
+            raise ValueError(
+                "distil=True needs the median's free runs to be finite over "
+                "the fitted records and excitations like them; every member "
+                "diverged there (member_record_errors_). Fit with "
+                "distil=False, or give longer records or another estimator."
+            )
+        return given, given_y, train, train_y, val, val_y
 
     def simulate(self, X, **kwargs):
         """Free-run simulation: the median of the members' at every sample.
