@@ -439,8 +439,8 @@ MUTATIONS = (
     Mutation(
         "records-like excitations with their phases kept",
         "sysid_nn/_engine/_selection.py",
-        "        turn = np.exp(2j * np.pi * rng.random(len(spectrum)))",
-        "        turn = np.exp(0j * rng.random(len(spectrum)))",
+        "    turn = np.exp(2j * np.pi * rng.random(len(spectrum)))",
+        "    turn = np.exp(0j * rng.random(len(spectrum)))",
         (
             "tests/test_selection.py::"
             "test_surrogate_excitation_keeps_spectrum_range_and_history",
@@ -825,8 +825,8 @@ MUTATIONS = (
     Mutation(
         "ensemble members parted by rounding",
         "sysid_nn/_estimators/_ensemble.py",
-        "    return errors <= ratio * max(level, _ROUNDING_ERROR)\n",
-        "    return errors <= ratio * level\n",
+        "    return bool(error <= ratio * max(level, _ROUNDING_ERROR))\n",
+        "    return bool(error <= ratio * level)\n",
         ("sysid_nn/_estimators/_ensemble.py::sysid_nn._estimators._ensemble._used",),
     ),
     Mutation(
