@@ -738,8 +738,8 @@ MUTATIONS = (
     Mutation(
         "distil: the draws of the validation records too",
         "sysid_nn/_estimators/_ensemble.py",
-        "[like_record(x, rng) for x in _as_records(X)]",
-        "[like_record(x, rng) for x in given]",
+        "[like_record(x, rng) for x in records]",
+        "[like_record(x, rng) for x in records + _as_records(X_val)]",
         (
             "tests/test_ensemble.py::"
             "test_the_distilled_network_learns_the_validation_records_too",
@@ -758,7 +758,7 @@ MUTATIONS = (
     Mutation(
         "distil: disagreement on the draws alone",
         "sysid_nn/_estimators/_ensemble.py",
-        "_distance(used, given, given_y), _ROUNDING_ERROR",
+        "_distance(given_runs, given_y), _ROUNDING_ERROR",
         "0.1, _ROUNDING_ERROR",
         (
             "tests/test_ensemble.py::"

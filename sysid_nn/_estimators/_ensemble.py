@@ -295,9 +295,39 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
                 UserWarning,
                 stacklevel=user_stacklevel(),
             )
+
+    def _distillation_records(self, X, X_val, seed: int) -> tuple:
+        """The excitations ``network_`` is trained and validated on, with
+        the median's free runs over them: ``(given, given_y, train,
+        train_y, val, val_y)``; ``given`` are the fitted records. Sets
+        ``draw_disagreement_`` from the members' runs the medians are made
+        of."""
+        records = _as_records(X)
+        rng = np.random.default_rng(seed)
+        draws = [
+            [like_record(x, rng) for x in records]
+            for _ in range(_DISTIL_TRAINING_DRAWS + _DISTIL_VALIDATION_DRAWS)
+        ]
         used = self._used_members()
-        self.draw_disagreement_ = _distance(used, val, val_y) / max(
-            _distance(used, given, given_y), _ROUNDING_ERROR
+        given = records + ([] if X_val is None else _as_records(X_val))
+        # A draw under which the median diverges is left out; the records
+        # themselves cannot be.
+        kept, given_y, given_runs = _finite_medians(used, given)
+        train, train_y, _ = _finite_medians(
+            used, [x for d in draws[:_DISTIL_TRAINING_DRAWS] for x in d]
+        )
+        val, val_y, val_runs = _finite_medians(
+            used, [x for d in draws[_DISTIL_TRAINING_DRAWS:] for x in d]
+        )
+        if not val or len(kept) < len(given):
+            raise ValueError(
+                "distil=True needs the median's free runs to be finite over "
+                "the fitted records and excitations like them; every member "
+                "diverged there (member_record_errors_). Fit with "
+                "distil=False, or give longer records or another estimator."
+            )
+        self.draw_disagreement_ = _distance(val_runs, val_y) / max(
+            _distance(given_runs, given_y), _ROUNDING_ERROR
         )
         if self.draw_disagreement_ > _DISAGREEMENT_WARNING:
             warnings.warn(
@@ -309,33 +339,6 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
                 "the ensemble. Use the ensemble's median, or a member.",
                 UserWarning,
                 stacklevel=user_stacklevel(),
-            )
-
-    def _distillation_records(self, X, X_val, seed: int) -> tuple:
-        """The excitations ``network_`` is trained and validated on, with
-        the median's free runs over them: ``(given, given_y, train,
-        train_y, val, val_y)``; ``given`` are the fitted records."""
-        given = _as_records(X) + ([] if X_val is None else _as_records(X_val))
-        rng = np.random.default_rng(seed)
-        draws = [
-            [like_record(x, rng) for x in _as_records(X)]
-            for _ in range(_DISTIL_TRAINING_DRAWS + _DISTIL_VALIDATION_DRAWS)
-        ]
-        given_y = [self.simulate(x) for x in given]
-        # A draw under which the median diverges is left out; the records
-        # themselves cannot be.
-        train, train_y = _finite_runs(
-            self, [x for d in draws[:_DISTIL_TRAINING_DRAWS] for x in d]
-        )
-        val, val_y = _finite_runs(
-            self, [x for d in draws[_DISTIL_TRAINING_DRAWS:] for x in d]
-        )
-        if not val or not all(np.all(np.isfinite(r)) for r in given_y):
-            raise ValueError(
-                "distil=True needs the median's free runs to be finite over "
-                "the fitted records and excitations like them; every member "
-                "diverged there (member_record_errors_). Fit with "
-                "distil=False, or give longer records or another estimator."
             )
         return given, given_y, train, train_y, val, val_y
 
@@ -412,12 +415,18 @@ def _as_records(X) -> list:
     return [np.asarray(x, dtype=float) for x in records]
 
 
-def _finite_runs(ensemble, records: list) -> tuple[list, list]:
-    """The records over which the ensemble's median free run is finite, and
-    those runs."""
-    runs = [ensemble.simulate(x) for x in records]
-    kept = [k for k, r in enumerate(runs) if np.all(np.isfinite(r))]
-    return [records[k] for k in kept], [runs[k] for k in kept]
+def _finite_medians(members: list, records: list) -> tuple[list, list, list]:
+    """The records over which the members' median free run is finite, those
+    medians (the ensemble's :meth:`~EnsembleRegressor.simulate`), and the
+    members' runs over each of them."""
+    runs = [[m.simulate(x) for m in members] for x in records]
+    medians = [_median(r) for r in runs]
+    kept = [k for k, r in enumerate(medians) if np.all(np.isfinite(r))]
+    return (
+        [records[k] for k in kept],
+        [medians[k] for k in kept],
+        [runs[k] for k in kept],
+    )
 
 
 def _record_error(member, records) -> float:
@@ -443,9 +452,11 @@ def _run_error(network, records: list, targets: list) -> float:
     return _run_error_of(runs, targets)
 
 
-def _distance(members: list, records: list, targets: list) -> float:
-    """The members' median :func:`_run_error` against ``targets``."""
-    return float(np.median([_run_error(m, records, targets) for m in members]))
+def _distance(runs: list, targets: list) -> float:
+    """The members' median :func:`_run_error_of` against ``targets``;
+    ``runs[i][k]``: member ``k``'s run over record ``i``."""
+    errors = [_run_error_of([r[k] for r in runs], targets) for k in range(len(runs[0]))]
+    return float(np.median(errors))
 
 
 def _run_error_of(runs: list, targets: list) -> float:
