@@ -134,7 +134,9 @@ def main(argv=None) -> None:
             if label.startswith("split"):
                 continue  # the field records' default protocol only
             for name, network in NETWORKS.items():
-                if network.__name__[:-9].lower() not in args.networks.split(","):
+                if network.__name__.removesuffix(
+                    "Regressor"
+                ).lower() not in args.networks.split(","):
                     continue
                 single, per_share, ensemble, cpu_single, cpu_ensemble = (
                     [],
@@ -176,7 +178,6 @@ def main(argv=None) -> None:
                             moved_networks.setdefault(shift, []).append(network_test)
                             disagreements.append(fitted.draw_disagreement_)
                             attempts.append(len(fitted.network_record_errors_))
-
                         if shift == 0:
                             left_out += int(np.sum(~fitted.members_used_))
                             members += len(fitted.estimators_)
