@@ -786,6 +786,63 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "distil: an earlier fit's network kept",
+        "sysid_nn/_estimators/_ensemble.py",
+        "            self.__dict__.pop(name, None)\n",
+        "            pass\n",
+        (
+            "tests/test_ensemble.py::"
+            "test_a_fit_without_distil_keeps_no_network_of_an_earlier_fit",
+        ),
+    ),
+    Mutation(
+        "distil: the median read as one network",
+        "sysid_nn/_estimators/_ensemble.py",
+        '    network = getattr(model, "network_", None)\n',
+        '    network = getattr(model, "network_", model)\n',
+        (
+            "tests/test_ensemble.py::"
+            "test_a_fit_without_distil_keeps_no_network_of_an_earlier_fit",
+        ),
+    ),
+    Mutation(
+        "distil: the report's structure of the median",
+        "sysid_nn/study/_structure.py",
+        "    if network is not estimator:\n",
+        "    if False:\n",
+        (
+            "tests/test_ensemble.py::"
+            "test_the_report_reads_the_structure_of_the_network_fitted_to_the_median",
+        ),
+    ),
+    Mutation(
+        "distil: the modes of the median",
+        "sysid_nn/cli/_modal.py",
+        "    modes = modal_parameters(network, dt, level=args.level)\n",
+        "    modes = modal_parameters(model.estimator, dt, level=args.level)\n",
+        (
+            "tests/test_cli_modal.py::"
+            "test_modal_of_a_distilled_ensemble_reads_its_network",
+        ),
+    ),
+    Mutation(
+        "distil: the command's --distil without members",
+        "sysid_nn/cli/_fit.py",
+        "        if distil:\n",
+        "        if False:\n",
+        ("tests/test_cli.py::test_fit_distil_needs_members",),
+    ),
+    Mutation(
+        "readouts: an ensemble taken for a network",
+        "sysid_nn/_saved.py",
+        "        check_network(estimator)\n    check_is_fitted",
+        "        pass\n    check_is_fitted",
+        (
+            "tests/test_ensemble.py::"
+            "test_readouts_of_an_ensemble_name_the_network_to_pass",
+        ),
+    ),
+    Mutation(
         "ensemble median over every member",
         "sysid_nn/_estimators/_ensemble.py",
         "zip(self.estimators_, used, strict=True) if u]",

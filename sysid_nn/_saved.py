@@ -74,7 +74,7 @@ def check_network(estimator: Any, *, ensemble: bool = False) -> None:
     if kind is EnsembleRegressor and not ensemble:
         raise TypeError(
             "estimator must be a TDLRegressor or an ISSMRegressor, got an "
-            "EnsembleRegressor: its median is not one network; export the "
+            "EnsembleRegressor: its median is not one network; pass the "
             "network fitted to it (fit with distil=True, then network_) or "
             "a member (estimators_[k])."
         )
@@ -86,6 +86,17 @@ def check_network(estimator: Any, *, ensemble: bool = False) -> None:
         )
         raise TypeError(f"estimator must be {allowed}, got {kind.__name__}.")
     check_is_fitted(estimator, "estimators_" if kind is EnsembleRegressor else "coefs_")
+
+
+def check_fitted_network(estimator: Any) -> None:
+    """Raise unless ``estimator`` is a fitted network (a ``TDLRegressor``,
+    an ``ISSMRegressor`` or a subclass): what the readouts take. An
+    ensemble's error names the network to pass instead."""
+    from sklearn.utils.validation import check_is_fitted
+
+    if not hasattr(estimator, "_layout"):
+        check_network(estimator)
+    check_is_fitted(estimator, "coefs_")
 
 
 def _dataclasses() -> dict[str, type]:

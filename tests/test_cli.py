@@ -170,7 +170,9 @@ def test_a_saved_ensemble_validates_as_its_median(records, tmp_path, capsys):
     rmse = np.sqrt(np.mean((y - ensemble.simulate(X)) ** 2))
     np.testing.assert_allclose(row["nrmse"].iloc[0], rmse / np.std(y), rtol=1e-10)
     report = (out / "report.md").read_text()
-    assert "the model is an ensemble of 3 networks" in report
+    # No modes of a median: the report says why and how to get one network.
+    assert "the model is the median of 3 networks" in report
+    assert "Fit it with distil=True" in report
     # Its parameters on one line of the models' table, its member's included.
     assert "output_lags=2), n_members=3 |" in report
     # Its median has no band: the command says so.
@@ -315,6 +317,16 @@ def test_fit_members_saves_the_median_of_their_fits(records, tmp_path, capsys):
     capsys.readouterr()
     assert main(["modal", str(model)]) == 1
     assert "median of 3 networks" in _one_error_line(capsys)
+
+
+def test_fit_distil_needs_members(records, tmp_path, capsys):
+    (a, _), _ = records
+    model = tmp_path / "model.sysid"
+    argv = ["fit", str(a), "--input", "force", "--output", "displacement"]
+    assert main([*argv, *TINY_FIT, "--distil", "--save", str(model)]) == 2
+    line = _one_error_line(capsys)
+    assert "--distil" in line and "--members N with N of at least 2" in line
+    assert not model.exists()
 
 
 def test_fit_with_validation_files(records, tmp_path, capsys):

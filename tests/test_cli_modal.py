@@ -66,3 +66,24 @@ def test_modal_missing_model_one_line(tmp_path, capsys):
     assert main(["modal", str(tmp_path / "none.joblib")]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "none.joblib" in err[0]
+
+
+def test_modal_of_a_distilled_ensemble_reads_its_network(saved, capsys, tmp_path):
+    model, truth = saved
+    records = model.parent / "records.csv"
+    ensemble = tmp_path / "ensemble.sysid"
+    argv = ["fit", str(records), "--split-by", "realization", "--input"]
+    argv += ["ground_acceleration", "--output", "drift_1", "--output", "drift_2"]
+    argv += ["--hidden", "0", "--n-init", "1", "--members", "2", "--distil"]
+    assert main([*argv, "--save", str(ensemble)]) == 0
+    out = capsys.readouterr().out
+    assert "median of 2 × TDL (hidden_layer_sizes=(), n_init=1), one network" in out
+    loaded = load_model(ensemble)
+    assert f"misses the fitted records by {loaded.network_record_error_:.3g}" in out
+    assert main(["modal", str(ensemble)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "the network fitted to the median of 2 (network_)" in lines[0]
+    freqs = [float(line.split()[1]) for line in lines[2:]]
+    modes = modal_parameters(loaded.network_, 0.02)
+    np.testing.assert_allclose(freqs, modes[modes.structural].frequency_hz.round(4))
+    np.testing.assert_allclose(freqs, truth.frequency, rtol=1e-3)

@@ -301,6 +301,54 @@ def test_distilling_a_median_that_diverges_is_refused():
         ensemble.fit(X, y)
 
 
+def test_a_fit_without_distil_keeps_no_network_of_an_earlier_fit():
+    from sysid_nn._estimators._ensemble import _NETWORK_ATTRIBUTES, one_network
+
+    X, y = _record(0)
+    ensemble = EnsembleRegressor(_Recorder(), n_members=3, distil=True, random_state=0)
+    ensemble.fit(X, y)
+    assert all(hasattr(ensemble, name) for name in _NETWORK_ATTRIBUTES)
+    assert one_network(ensemble) is ensemble.network_
+    # Refitted to other records without distil: the earlier network is no
+    # network of this median, and nothing reads it as one.
+    ensemble.set_params(distil=False).fit(X, 2 * y)
+    assert not any(hasattr(ensemble, name) for name in _NETWORK_ATTRIBUTES)
+    with pytest.raises(ValueError, match=r"median of 3 networks.*distil=True"):
+        one_network(ensemble)
+    # A network passes through.
+    member = ensemble.estimators_[0]
+    assert one_network(member) is member
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_readouts_of_an_ensemble_name_the_network_to_pass():
+    from sysid_nn import (
+        backbone,
+        frequency_response,
+        instantaneous_frequency,
+        modal_parameters,
+        nonlinearity_test,
+    )
+
+    X, y = _record(0)
+    ensemble = EnsembleRegressor(_net(), n_members=2, random_state=0).fit(X, y)
+    for readout in (
+        lambda m: modal_parameters(m, 0.01),
+        lambda m: backbone(m, 0.01),
+        lambda m: nonlinearity_test(m, X, y),
+        lambda m: instantaneous_frequency(m, X, 0.01),
+        lambda m: frequency_response(m, 0.01),
+    ):
+        with pytest.raises(TypeError, match=r"distil=True, then network_\) or a"):
+            readout(ensemble)
+        with pytest.raises(TypeError, match="got _Recorder"):
+            readout(_Recorder(random_state=0).fit(X, y))
+    # The network fitted to the median is read as any network.
+    ensemble.set_params(distil=True).fit(X, y)
+    assert len(modal_parameters(ensemble.network_, 0.01))
+
+
 @pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
 def test_a_distilled_network_is_a_network_the_file_keeps(tmp_path):
     from sysid_nn import load_model, save_model
@@ -421,3 +469,20 @@ def test_a_network_that_misses_the_records_is_fitted_again_on_another_seed():
     k = next(k for k, p in parity.items() if p[0] == 1)
     every = clone(ensemble).set_params(random_state=k, max_error_ratio=None)
     assert len(every.fit(X, y).network_record_errors_) == 1
+
+
+@pytest.mark.filterwarnings("ignore:The linear model of:UserWarning")
+@pytest.mark.filterwarnings("ignore::sklearn.exceptions.ConvergenceWarning")
+def test_the_report_reads_the_structure_of_the_network_fitted_to_the_median():
+    from sysid_nn.study._structure import structure_lines
+
+    X, y = _record(0)
+    Xv, yv = _record(1)
+    ensemble = EnsembleRegressor(_net(), n_members=2, random_state=0).fit(X, y)
+    (line,) = structure_lines(ensemble, [Xv], [yv], 0.01)
+    assert line.startswith("No modes or non-linearity test: the model is the median")
+    ensemble.set_params(distil=True).fit(X, y)
+    lines = structure_lines(ensemble, [Xv], [yv], 0.01)
+    assert lines[0] == "Of the network fitted to the ensemble's median (`network_`):"
+    assert lines[2:] == structure_lines(ensemble.network_, [Xv], [yv], 0.01)
+    assert any(line.startswith("| mode |") for line in lines)

@@ -15,9 +15,9 @@ import numbers
 import numpy as np
 import pandas as pd
 from scipy.signal import butter, hilbert, sosfiltfilt
-from sklearn.utils.validation import check_is_fitted
 
 from sysid_nn._analysis._modal import _check_dt, modal_parameters
+from sysid_nn._saved import check_fitted_network
 
 __all__ = ["backbone"]
 
@@ -325,7 +325,7 @@ def backbone(
             )
         sim, s0, f1, zeta1, f2 = _generator_sim(estimator, dt, output, response)
     else:
-        check_is_fitted(estimator, "coefs_")
+        check_fitted_network(estimator)
         for name, value, limit in (
             ("output", output, estimator.n_outputs_),
             ("input", input, estimator.n_features_in_),

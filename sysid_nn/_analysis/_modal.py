@@ -23,11 +23,11 @@ import numbers
 import numpy as np
 import pandas as pd
 from scipy.stats import norm
-from sklearn.utils.validation import check_is_fitted
 
 from sysid_nn._docstrings import fill_doc
 from sysid_nn._kernels._mlp import LOGISTIC
 from sysid_nn._records._data import _FREE_RUN
+from sysid_nn._saved import check_fitted_network
 
 __all__ = ["instantaneous_frequency", "modal_parameters"]
 
@@ -78,12 +78,7 @@ def _check_arguments(estimator, dt, level) -> float:
             f"level must be a probability strictly between 0 and 1 (e.g. 0.95); "
             f"got {level!r}."
         )
-    if not hasattr(estimator, "_layout"):
-        raise TypeError(
-            f"estimator must be a fitted TDLRegressor or ISSMRegressor; got "
-            f"{type(estimator).__name__}."
-        )
-    check_is_fitted(estimator, "coefs_")
+    check_fitted_network(estimator)
     return dt
 
 
@@ -486,7 +481,7 @@ def instantaneous_frequency(estimator, X, dt) -> pd.DataFrame:
     True
     """
     dt = _check_dt(dt)
-    check_is_fitted(estimator, "coefs_")
+    check_fitted_network(estimator)
     X = np.asarray(X, dtype=np.float64)
     if X.ndim == 1:
         X = X[:, None]

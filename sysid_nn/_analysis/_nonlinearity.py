@@ -18,6 +18,7 @@ from sklearn.utils.validation import check_is_fitted
 
 from sysid_nn._analysis._uncertainty import _bandwidth
 from sysid_nn._records._data import is_sequence_list
+from sysid_nn._saved import check_fitted_network
 from sysid_nn._statistics import loss_differential_statistic
 
 __all__ = ["NonlinearityTestResult", "nonlinearity_test"]
@@ -171,7 +172,7 @@ def nonlinearity_test(
     >>> bool(result.pvalue < 0.01), result.mean_loss_network < result.mean_loss_linear
     (True, True)
     """
-    check_is_fitted(estimator, "coefs_")
+    check_fitted_network(estimator)
     if not isinstance(level, numbers.Real) or not 0.0 < level < 1.0:
         raise ValueError(
             f"level must be a probability strictly between 0 and 1 (e.g. 0.05); "

@@ -59,6 +59,16 @@ _DISAGREEMENT_WARNING = 5.0
 #: records as a member must to enter the median.
 _NETWORK_ATTEMPTS = 3
 
+#: What ``distil=True`` fits; a fit without it drops them, so a network
+#: fitted to an earlier fit's median never stands for this one.
+_NETWORK_ATTRIBUTES = (
+    "network_",
+    "network_record_error_",
+    "network_record_errors_",
+    "network_median_error_",
+    "draw_disagreement_",
+)
+
 
 class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
     """Fits of one network on several seeds and held-out shares, combined.
@@ -257,6 +267,8 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         errors = np.array([_record_error(m, records) for m in members])
         self.member_record_errors_ = errors
         self.members_used_ = _used(errors, self.max_error_ratio)
+        for name in _NETWORK_ATTRIBUTES:
+            self.__dict__.pop(name, None)
         if self.distil:
             # Drawn after the members' seeds: distilling changes no member.
             attempts = rng.randint(np.iinfo(np.int32).max, size=_NETWORK_ATTEMPTS)
@@ -407,6 +419,48 @@ class EnsembleRegressor(_RecordsRegressorTags, RegressorMixin, BaseEstimator):
         %(score)s
         """
         return free_run_r2(self.predict(X), y, sample_weight)
+
+
+def one_network(model):
+    """The network that stands for ``model``'s structure: ``model`` itself,
+    or an ensemble's ``network_`` (the median is no network, so it has no
+    modes of its own).
+
+    Raises
+    ------
+    ValueError
+        For an ensemble fitted without ``distil=True``, saying how to get
+        one network.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sysid_nn import EnsembleRegressor, TDLRegressor
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.standard_normal((300, 1))
+    >>> y = np.convolve(u[:, 0], [0.0, 0.5, 0.25])[:300]
+    >>> net = TDLRegressor(hidden_layer_sizes=(), n_init=1, max_iter=5)
+    >>> ensemble = EnsembleRegressor(net, n_members=2, random_state=0).fit(u, y)
+    >>> one_network(ensemble)
+    Traceback (most recent call last):
+    ...
+    ValueError: the model is the median of 2 networks, ...
+    >>> distilled = ensemble.set_params(distil=True).fit(u, y)
+    >>> one_network(distilled) is distilled.network_
+    True
+    """
+    if not isinstance(model, EnsembleRegressor):
+        return model
+    network = getattr(model, "network_", None)
+    if network is None:
+        raise ValueError(
+            f"the model is the median of {len(model.estimators_)} networks, "
+            "which is not one network and has no modes of its own. Fit it with "
+            "distil=True (`sysid-nn fit --members N --distil`) for one network "
+            "fitted to the median (network_), or read a member's "
+            "(estimators_[k])."
+        )
+    return network
 
 
 def _as_records(X) -> list:

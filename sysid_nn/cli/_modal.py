@@ -85,6 +85,7 @@ def modal_table(modes, outputs, *, show_all: bool = False) -> str:
 
 def _run_modal(args: argparse.Namespace) -> int:
     from sysid_nn._analysis._modal import modal_parameters
+    from sysid_nn._estimators._ensemble import one_network
     from sysid_nn.cli._validate import _load_model
 
     bundle = _load_model(args.model)
@@ -96,15 +97,17 @@ def _run_modal(args: argparse.Namespace) -> int:
             "--dt out."
         )
     model = bundle.model
-    members = getattr(model.estimator, "estimators_", None)
-    if members is not None:
-        raise _InputError(
-            f"{args.model} holds the median of {len(members)} networks (saved by "
-            "`sysid-nn fit --members`), which is not one network and has no "
-            "modes of its own; read a member's in Python: "
-            "sysid_nn.modal_parameters(sysid_nn.load_model(path).estimators_[k], dt)."
+    try:
+        network = one_network(model.estimator)
+    except ValueError as exc:
+        raise _InputError(f"{args.model}: {exc}") from None
+    of = ""
+    if network is not model.estimator:
+        of = (
+            f", the network fitted to the median of "
+            f"{len(model.estimator.estimators_)} (network_)"
         )
-    modes = modal_parameters(model.estimator, dt, level=args.level)
-    print(f"Modes of {args.model} (dt = {dt:g} s), linearised at rest:")
+    modes = modal_parameters(network, dt, level=args.level)
+    print(f"Modes of {args.model}{of} (dt = {dt:g} s), linearised at rest:")
     print(modal_table(modes, tuple(model.outputs), show_all=args.all))
     return 0

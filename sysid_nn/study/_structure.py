@@ -12,7 +12,8 @@ def structure_lines(estimator, X: list, y: list, dt: float) -> list[str]:
 
     The records are ones the fit did not see (``validate``'s), as the test
     needs. A model that keeps no linear model of its own gets the modes only,
-    with the reason; an ensemble neither, with the reason.
+    with the reason; an ensemble those of the network fitted to its median
+    (``network_``), or, fitted without one, neither, with the reason.
 
     Examples
     --------
@@ -33,15 +34,17 @@ def structure_lines(estimator, X: list, y: list, dt: float) -> list[str]:
     """
     from sysid_nn._analysis._modal import modal_parameters
     from sysid_nn._analysis._nonlinearity import nonlinearity_test
+    from sysid_nn._estimators._ensemble import one_network
 
-    members = getattr(estimator, "estimators_", None)
-    if members is not None:
-        # An ensemble's median free run is no one network: no linearisation.
+    try:
+        network = one_network(estimator)
+    except ValueError as exc:
+        return [f"No modes or non-linearity test: {exc}"]
+    if network is not estimator:
         return [
-            f"No modes or non-linearity test: the model is an ensemble of "
-            f"{len(members)} networks, whose median free run is not one "
-            "network's; read a member's (`estimators_[k]`) with "
-            "`sysid_nn.modal_parameters`."
+            "Of the network fitted to the ensemble's median (`network_`):",
+            "",
+            *structure_lines(network, X, y, dt),
         ]
     modes = modal_parameters(estimator, dt)
     found = modes[modes.structural]
