@@ -87,3 +87,13 @@ def test_modal_of_a_distilled_ensemble_reads_its_network(saved, capsys, tmp_path
     modes = modal_parameters(loaded.network_, 0.02)
     np.testing.assert_allclose(freqs, modes[modes.structural].frequency_hz.round(4))
     np.testing.assert_allclose(freqs, truth.frequency, rtol=1e-3)
+    # `validate` scores the median and the network, and its report gives
+    # the network's modes.
+    out = tmp_path / "validation"
+    argv = ["validate", "--model", str(ensemble), str(records)]
+    assert main([*argv, "--split-by", "realization", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    head, network = printed.split("The network fitted to the median (network_")
+    assert "NRMSE" in head and "simulation" in network
+    report = (out / "report.md").read_text()
+    assert "Of the network fitted to the ensemble's median (`network_`)" in report

@@ -217,6 +217,14 @@ def _run_validate(args: argparse.Namespace) -> int:
         )
         scores = _scores(model.estimator, X, y, y_init=y_init)
         print("\n".join(_score_lines(scores, model.outputs, units)))
+        network = getattr(model.estimator, "network_", None)
+        if network is not None:  # saved by `fit --members N --distil`
+            print(
+                "The network fitted to the median (network_, whose modes the "
+                "report gives), on the same records:"
+            )
+            scores = _scores(network, X, y, y_init=y_init)
+            print("\n".join(_score_lines(scores, model.outputs, units)))
         written = "results.csv, summary.csv" + (f", series.{series}" if series else "")
         print(f"wrote {result.out_dir}/report.md, {written} and figures")
         if args.band is not None:
