@@ -135,8 +135,8 @@ def _add_fit(sub: argparse._SubParsersAction) -> None:
         help="with --members: also fit one network to the median's free runs "
         "over the records and excitations like them (distil=True), saved with "
         "the median as its network_, which `modal` and the report's structure "
-        "read; about one fit more (up to three where a network misses the "
-        "records)",
+        "read; it costs a fit to five times the records (up to three where a "
+        "network misses the records)",
     )
     p.add_argument("--seed", type=_seed, default=0, help="random seed")
     _add_parallel(p)
