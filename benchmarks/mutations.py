@@ -826,6 +826,16 @@ MUTATIONS = (
         ),
     ),
     Mutation(
+        "distil: validate silent on the network",
+        "sysid_nn/cli/_validate.py",
+        "        if network is not None:  # saved by `fit --members N --distil`\n",
+        "        if False:\n",
+        (
+            "tests/test_cli_modal.py::"
+            "test_modal_of_a_distilled_ensemble_reads_its_network",
+        ),
+    ),
+    Mutation(
         "distil: the command's --distil without members",
         "sysid_nn/cli/_fit.py",
         "        if distil:\n",
