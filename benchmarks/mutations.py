@@ -844,9 +844,9 @@ MUTATIONS = (
     ),
     Mutation(
         "readouts: an ensemble taken for a network",
-        "sysid_nn/_saved.py",
-        "        check_network(estimator)\n    check_is_fitted",
-        "        pass\n    check_is_fitted",
+        "sysid_nn/_analysis/_modal.py",
+        "        raise not_a_network(estimator)\n",
+        "        pass\n",
         (
             "tests/test_ensemble.py::"
             "test_readouts_of_an_ensemble_name_the_network_to_pass",

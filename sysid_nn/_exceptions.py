@@ -1,4 +1,5 @@
-"""The warnings of the estimators, and the version stamp of fitted ones."""
+"""The warnings of the estimators, the version stamp of fitted ones, and the
+error for a readout given something other than one network."""
 
 from __future__ import annotations
 
@@ -109,3 +110,27 @@ def user_stacklevel() -> int:
     finally:
         del frame
     return level
+
+
+def not_a_network(estimator) -> TypeError:
+    """The error for a readout or an export given ``estimator``, which is
+    not a ``TDLRegressor`` or an ``ISSMRegressor``. An ensemble's (known by
+    its class name: the foundation imports no estimator) names what to pass
+    instead.
+
+    Examples
+    --------
+    >>> not_a_network(1.0)
+    TypeError('estimator must be a TDLRegressor or an ISSMRegressor, got float.')
+    """
+    kind = type(estimator).__name__
+    if kind == "EnsembleRegressor":
+        return TypeError(
+            "estimator must be a TDLRegressor or an ISSMRegressor, got an "
+            "EnsembleRegressor: its median is not one network; pass the "
+            "network fitted to it (fit with distil=True, then network_) or "
+            "a member (estimators_[k])."
+        )
+    return TypeError(
+        f"estimator must be a TDLRegressor or an ISSMRegressor, got {kind}."
+    )

@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from sysid_nn._exceptions import not_a_network
+
 __all__ = ["load_model", "save_model"]
 
 #: Name and version of the file format; a reader refuses newer versions.
@@ -72,31 +74,15 @@ def check_network(estimator: Any, *, ensemble: bool = False) -> None:
 
     kind = type(estimator)
     if kind is EnsembleRegressor and not ensemble:
-        raise TypeError(
-            "estimator must be a TDLRegressor or an ISSMRegressor, got an "
-            "EnsembleRegressor: its median is not one network; pass the "
-            "network fitted to it (fit with distil=True, then network_) or "
-            "a member (estimators_[k])."
-        )
+        raise not_a_network(estimator)
     if kind not in _estimators().values():
-        allowed = (
-            "a TDLRegressor, an ISSMRegressor or an EnsembleRegressor"
-            if ensemble
-            else "a TDLRegressor or an ISSMRegressor"
+        if not ensemble:
+            raise not_a_network(estimator)
+        raise TypeError(
+            "estimator must be a TDLRegressor, an ISSMRegressor or an "
+            f"EnsembleRegressor, got {kind.__name__}."
         )
-        raise TypeError(f"estimator must be {allowed}, got {kind.__name__}.")
     check_is_fitted(estimator, "estimators_" if kind is EnsembleRegressor else "coefs_")
-
-
-def check_fitted_network(estimator: Any) -> None:
-    """Raise unless ``estimator`` is a fitted network (a ``TDLRegressor``,
-    an ``ISSMRegressor`` or a subclass): what the readouts take. An
-    ensemble's error names the network to pass instead."""
-    from sklearn.utils.validation import check_is_fitted
-
-    if not hasattr(estimator, "_layout"):
-        check_network(estimator)
-    check_is_fitted(estimator, "coefs_")
 
 
 def _dataclasses() -> dict[str, type]:

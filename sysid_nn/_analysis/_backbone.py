@@ -16,8 +16,11 @@ import numpy as np
 import pandas as pd
 from scipy.signal import butter, hilbert, sosfiltfilt
 
-from sysid_nn._analysis._modal import _check_dt, modal_parameters
-from sysid_nn._saved import check_fitted_network
+from sysid_nn._analysis._modal import (
+    _check_dt,
+    check_fitted_network,
+    modal_parameters,
+)
 
 __all__ = ["backbone"]
 

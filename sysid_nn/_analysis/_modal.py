@@ -23,11 +23,12 @@ import numbers
 import numpy as np
 import pandas as pd
 from scipy.stats import norm
+from sklearn.utils.validation import check_is_fitted
 
 from sysid_nn._docstrings import fill_doc
+from sysid_nn._exceptions import not_a_network
 from sysid_nn._kernels._mlp import LOGISTIC
 from sysid_nn._records._data import _FREE_RUN
-from sysid_nn._saved import check_fitted_network
 
 __all__ = ["instantaneous_frequency", "modal_parameters"]
 
@@ -64,6 +65,15 @@ def _check_dt(dt) -> float:
             f"{dt!r}. The fitted model does not know its sampling interval."
         )
     return float(dt)
+
+
+def check_fitted_network(estimator) -> None:
+    """Raise unless ``estimator`` is a fitted network (a ``TDLRegressor``,
+    an ``ISSMRegressor`` or a subclass): what the readouts take. An
+    ensemble's error names the network to pass instead."""
+    if not hasattr(estimator, "_layout"):
+        raise not_a_network(estimator)
+    check_is_fitted(estimator, "coefs_")
 
 
 def _check_arguments(estimator, dt, level) -> float:

@@ -16,9 +16,9 @@ import numpy as np
 from scipy.stats import norm
 from sklearn.utils.validation import check_is_fitted
 
+from sysid_nn._analysis._modal import check_fitted_network
 from sysid_nn._analysis._uncertainty import _bandwidth
 from sysid_nn._records._data import is_sequence_list
-from sysid_nn._saved import check_fitted_network
 from sysid_nn._statistics import loss_differential_statistic
 
 __all__ = ["NonlinearityTestResult", "nonlinearity_test"]
