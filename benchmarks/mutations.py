@@ -909,8 +909,8 @@ MUTATIONS = (
     Mutation(
         "fit --members ignores --seed",
         "sysid_nn/cli/_fit.py",
-        "    return EnsembleRegressor(estimator, n_members=members, random_state=seed)",
-        "    return EnsembleRegressor(estimator, n_members=members)",
+        "        estimator, n_members=members, distil=distil, random_state=seed\n",
+        "        estimator, n_members=members, distil=distil\n",
         ("tests/test_cli.py::test_fit_members_saves_the_median_of_their_fits",),
     ),
     Mutation(
